@@ -1,0 +1,219 @@
+//! Stage options: a small typed schema, and the validated values a stage receives.
+//!
+//! Options travel as JSON (they cross the plugin boundary), so the schema is JSON too.
+//! The runner checks user options against the schema before a stage runs, so stages can
+//! read typed values without re-validating, and a typo in a pipeline file is an error
+//! rather than a silently ignored key.
+
+use std::path::PathBuf;
+
+use serde::{Deserialize, Serialize};
+use serde_json::{Map, Value};
+
+use crate::stage::StageError;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum OptionKind {
+    Bool,
+    Int,
+    Float,
+    String,
+    Path,
+}
+
+impl OptionKind {
+    fn accepts(self, v: &Value) -> bool {
+        match self {
+            Self::Bool => v.is_boolean(),
+            Self::Int => v.is_i64() || v.is_u64(),
+            Self::Float => v.is_number(),
+            Self::String | Self::Path => v.is_string(),
+        }
+    }
+
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Bool => "bool",
+            Self::Int => "int",
+            Self::Float => "float",
+            Self::String => "string",
+            Self::Path => "path",
+        }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct OptionSpec {
+    pub name: String,
+    pub kind: OptionKind,
+    /// `None` means the option is required.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub default: Option<Value>,
+    #[serde(default)]
+    pub help: String,
+}
+
+impl OptionSpec {
+    pub fn new(name: &str, kind: OptionKind, default: Option<Value>, help: &str) -> Self {
+        Self {
+            name: name.to_owned(),
+            kind,
+            default,
+            help: help.to_owned(),
+        }
+    }
+
+    pub fn int(name: &str, default: i64, help: &str) -> Self {
+        Self::new(name, OptionKind::Int, Some(default.into()), help)
+    }
+
+    pub fn float(name: &str, default: f64, help: &str) -> Self {
+        Self::new(name, OptionKind::Float, Some(default.into()), help)
+    }
+
+    pub fn bool(name: &str, default: bool, help: &str) -> Self {
+        Self::new(name, OptionKind::Bool, Some(default.into()), help)
+    }
+
+    pub fn string(name: &str, default: &str, help: &str) -> Self {
+        Self::new(name, OptionKind::String, Some(default.into()), help)
+    }
+
+    /// An option without a default: the stage cannot run without it.
+    pub fn required(name: &str, kind: OptionKind, help: &str) -> Self {
+        Self::new(name, kind, None, help)
+    }
+
+    /// An option that may be absent, with no default value.
+    pub fn optional(name: &str, kind: OptionKind, help: &str) -> Self {
+        Self::new(name, kind, Some(Value::Null), help)
+    }
+}
+
+/// Option values checked against a stage's schema, with defaults filled in.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct Options(pub Map<String, Value>);
+
+impl Options {
+    /// Checks `given` against `specs`: unknown names, wrong types and missing required
+    /// options are errors; absent options take their defaults.
+    pub fn validate(
+        stage: &str,
+        specs: &[OptionSpec],
+        given: &Map<String, Value>,
+    ) -> Result<Self, StageError> {
+        for key in given.keys() {
+            if !specs.iter().any(|s| &s.name == key) {
+                let known: Vec<&str> = specs.iter().map(|s| s.name.as_str()).collect();
+                return Err(StageError::Options(format!(
+                    "stage '{stage}' has no option '{key}' (it has: {})",
+                    if known.is_empty() {
+                        "none".to_owned()
+                    } else {
+                        known.join(", ")
+                    }
+                )));
+            }
+        }
+        let mut out = Map::new();
+        for spec in specs {
+            match given.get(&spec.name).filter(|v| !v.is_null()) {
+                Some(v) if spec.kind.accepts(v) => {
+                    out.insert(spec.name.clone(), v.clone());
+                }
+                Some(v) => {
+                    return Err(StageError::Options(format!(
+                        "stage '{stage}' option '{}': expected {}, got {v}",
+                        spec.name,
+                        spec.kind.as_str()
+                    )));
+                }
+                None => match &spec.default {
+                    Some(d) => {
+                        out.insert(spec.name.clone(), d.clone());
+                    }
+                    None => {
+                        return Err(StageError::Options(format!(
+                            "stage '{stage}' needs option '{}' ({})",
+                            spec.name, spec.help
+                        )));
+                    }
+                },
+            }
+        }
+        Ok(Self(out))
+    }
+
+    pub fn get(&self, name: &str) -> Option<&Value> {
+        self.0.get(name).filter(|v| !v.is_null())
+    }
+
+    pub fn get_bool(&self, name: &str) -> Option<bool> {
+        self.get(name).and_then(Value::as_bool)
+    }
+
+    pub fn get_i64(&self, name: &str) -> Option<i64> {
+        self.get(name).and_then(Value::as_i64)
+    }
+
+    pub fn get_u64(&self, name: &str) -> Option<u64> {
+        self.get(name).and_then(Value::as_u64)
+    }
+
+    pub fn get_f64(&self, name: &str) -> Option<f64> {
+        self.get(name).and_then(Value::as_f64)
+    }
+
+    pub fn get_str(&self, name: &str) -> Option<&str> {
+        self.get(name).and_then(Value::as_str)
+    }
+
+    pub fn get_path(&self, name: &str) -> Option<PathBuf> {
+        self.get_str(name).map(PathBuf::from)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    fn specs() -> Vec<OptionSpec> {
+        vec![
+            OptionSpec::int("points", 200_000, "extra points"),
+            OptionSpec::required("gt", OptionKind::Path, "ground truth dir"),
+            OptionSpec::optional("model", OptionKind::Int, "sparse model index"),
+        ]
+    }
+
+    fn map(v: Value) -> Map<String, Value> {
+        v.as_object().cloned().unwrap_or_default()
+    }
+
+    #[test]
+    fn fills_defaults_and_keeps_given() {
+        let o = Options::validate("s", &specs(), &map(json!({"gt": "/x"}))).expect("valid");
+        assert_eq!(o.get_u64("points"), Some(200_000));
+        assert_eq!(o.get_path("gt"), Some(PathBuf::from("/x")));
+        assert_eq!(o.get_i64("model"), None);
+    }
+
+    #[test]
+    fn rejects_unknown_wrong_type_and_missing() {
+        let e = Options::validate("s", &specs(), &map(json!({"gt": "/x", "pointz": 1})));
+        assert!(e.unwrap_err().to_string().contains("no option 'pointz'"));
+        let e = Options::validate("s", &specs(), &map(json!({"gt": "/x", "points": "many"})));
+        assert!(e.unwrap_err().to_string().contains("expected int"));
+        let e = Options::validate("s", &specs(), &map(json!({})));
+        assert!(e.unwrap_err().to_string().contains("needs option 'gt'"));
+    }
+
+    #[test]
+    fn int_is_accepted_where_float_is_expected() {
+        let s = vec![OptionSpec::float("scale", 1.0, "")];
+        let o = Options::validate("s", &s, &map(json!({"scale": 2}))).expect("valid");
+        assert_eq!(o.get_f64("scale"), Some(2.0));
+    }
+}

@@ -1,0 +1,290 @@
+//! The scene directory: `scene.json` plus the files it names.
+//!
+//! Format `cocog.scene`, version `MAJOR.MINOR`. A reader accepts every minor version of
+//! its major (new minors only add optional fields) and refuses other majors by name.
+//! Poses are `world_from_camera`, 4×4 row-major, OpenCV camera axes (x right, y down,
+//! z forward). Relative paths resolve against the scene directory; ingest stores
+//! absolute paths to the dataset's images so scenes can live anywhere.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+
+use crate::atomic;
+
+pub const FORMAT: &str = "cocog.scene";
+pub const MAJOR: u32 = 1;
+pub const MINOR: u32 = 0;
+pub const MANIFEST: &str = "scene.json";
+
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{path}: not a valid scene manifest: {source}")]
+    Parse {
+        path: PathBuf,
+        #[source]
+        source: serde_json::Error,
+    },
+    #[error("{path}: {message}")]
+    Invalid { path: PathBuf, message: String },
+}
+
+/// A pinhole camera. Distorted models are undistorted or refused at ingest.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Camera {
+    pub id: u32,
+    pub width: u32,
+    pub height: u32,
+    pub fx: f64,
+    pub fy: f64,
+    pub cx: f64,
+    pub cy: f64,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Split {
+    Train,
+    Test,
+}
+
+/// A thin-lens state for one view: learned by CoCoGaussian, or known (synthetic data).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Lens {
+    /// Distance of the plane in focus, in scene units along the optical axis.
+    pub focus_distance: f64,
+    /// Aperture scale K of the circle-of-confusion model (pixels × scene units).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub aperture: Option<f64>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct View {
+    /// Stable name, the image's file stem; `render` names its output after it.
+    pub name: String,
+    pub image: String,
+    pub camera: u32,
+    pub world_from_camera: [[f64; 4]; 4],
+    pub split: Split,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lens: Option<Lens>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub depth: Option<String>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Bounds {
+    /// Nearest and farthest scene depth over all views (LLFF bounds or from points).
+    pub near: f64,
+    pub far: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HistoryEntry {
+    pub stage: String,
+    /// "built-in" or the plugin file and version that ran.
+    pub provider: String,
+    pub input: String,
+    pub options: Value,
+    pub cocog_version: String,
+    /// Seconds since the Unix epoch.
+    pub finished_at: u64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Scene {
+    pub format: String,
+    pub version: String,
+    pub cameras: Vec<Camera>,
+    pub views: Vec<View>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bounds: Option<Bounds>,
+    /// World up direction, when known (e.g. from the mean camera up vector).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub up: Option<[f64; 3]>,
+    /// Initial point cloud (xyz + rgb PLY), relative to the scene dir.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub points: Option<String>,
+    /// Trained Gaussians (INRIA 3DGS PLY), relative to the scene dir.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gaussians: Option<String>,
+    #[serde(default)]
+    pub history: Vec<HistoryEntry>,
+}
+
+impl Default for Scene {
+    fn default() -> Self {
+        Self {
+            format: FORMAT.to_owned(),
+            version: format!("{MAJOR}.{MINOR}"),
+            cameras: Vec::new(),
+            views: Vec::new(),
+            bounds: None,
+            up: None,
+            points: None,
+            gaussians: None,
+            history: Vec::new(),
+        }
+    }
+}
+
+impl Scene {
+    /// Reads and validates `dir/scene.json`.
+    pub fn load(dir: &Path) -> Result<Self, SceneError> {
+        let path = dir.join(MANIFEST);
+        let text = std::fs::read_to_string(&path).map_err(|source| SceneError::Io {
+            path: path.clone(),
+            source,
+        })?;
+        // Check format and version before the full parse, so a newer manifest gets a
+        // version error rather than a confusing missing-field error.
+        let raw: Value = serde_json::from_str(&text).map_err(|source| SceneError::Parse {
+            path: path.clone(),
+            source,
+        })?;
+        check_header(&path, &raw)?;
+        let scene: Self = serde_json::from_value(raw).map_err(|source| SceneError::Parse {
+            path: path.clone(),
+            source,
+        })?;
+        scene
+            .validate()
+            .map_err(|message| SceneError::Invalid { path, message })?;
+        Ok(scene)
+    }
+
+    /// Writes `dir/scene.json` atomically (temp file, then rename).
+    pub fn save(&self, dir: &Path) -> Result<(), SceneError> {
+        let path = dir.join(MANIFEST);
+        self.validate().map_err(|message| SceneError::Invalid {
+            path: path.clone(),
+            message,
+        })?;
+        let mut text = serde_json::to_string_pretty(self).map_err(|source| SceneError::Parse {
+            path: path.clone(),
+            source,
+        })?;
+        text.push('\n');
+        atomic::write(&path, text.as_bytes()).map_err(|source| SceneError::Io { path, source })
+    }
+
+    /// Resolves a path stored in the manifest against the scene directory.
+    pub fn resolve(dir: &Path, stored: &str) -> PathBuf {
+        let p = Path::new(stored);
+        if p.is_absolute() {
+            p.to_path_buf()
+        } else {
+            dir.join(p)
+        }
+    }
+
+    pub fn camera(&self, id: u32) -> Option<&Camera> {
+        self.cameras.iter().find(|c| c.id == id)
+    }
+
+    pub fn views_in(&self, split: Split) -> impl Iterator<Item = &View> {
+        self.views.iter().filter(move |v| v.split == split)
+    }
+
+    /// Checks internal consistency; the message names the offending field.
+    pub fn validate(&self) -> Result<(), String> {
+        for (i, c) in self.cameras.iter().enumerate() {
+            let finite = [c.fx, c.fy, c.cx, c.cy].iter().all(|v| v.is_finite());
+            if !finite || c.fx <= 0.0 || c.fy <= 0.0 || c.width == 0 || c.height == 0 {
+                return Err(format!(
+                    "cameras[{i}] (id {}): expected positive size and finite positive focal lengths",
+                    c.id
+                ));
+            }
+            if self.cameras[..i].iter().any(|o| o.id == c.id) {
+                return Err(format!("cameras[{i}]: duplicate camera id {}", c.id));
+            }
+        }
+        for (i, v) in self.views.iter().enumerate() {
+            if self.camera(v.camera).is_none() {
+                return Err(format!(
+                    "views[{i}] ({}): camera {} is not in `cameras`",
+                    v.name, v.camera
+                ));
+            }
+            check_pose(&v.world_from_camera)
+                .map_err(|m| format!("views[{i}] ({}).world_from_camera: {m}", v.name))?;
+            if let Some(l) = &v.lens
+                && !(l.focus_distance.is_finite() && l.focus_distance > 0.0)
+            {
+                return Err(format!(
+                    "views[{i}] ({}).lens.focus_distance: expected a positive finite distance, got {}",
+                    v.name, l.focus_distance
+                ));
+            }
+        }
+        if let Some(b) = &self.bounds
+            && !(b.near.is_finite() && b.far.is_finite() && b.near < b.far)
+        {
+            return Err(format!(
+                "bounds: expected finite near < far, got near {} far {}",
+                b.near, b.far
+            ));
+        }
+        Ok(())
+    }
+}
+
+fn check_header(path: &Path, raw: &Value) -> Result<(), SceneError> {
+    let invalid = |message: String| SceneError::Invalid {
+        path: path.to_path_buf(),
+        message,
+    };
+    let format = raw.get("format").and_then(Value::as_str);
+    if format != Some(FORMAT) {
+        return Err(invalid(format!(
+            "field `format`: expected \"{FORMAT}\", found {}",
+            format.map_or("nothing".to_owned(), |f| format!("\"{f}\""))
+        )));
+    }
+    let version = raw.get("version").and_then(Value::as_str).unwrap_or("");
+    let major = version
+        .split('.')
+        .next()
+        .and_then(|m| m.parse::<u32>().ok());
+    match major {
+        Some(MAJOR) => Ok(()),
+        Some(m) => Err(invalid(format!(
+            "manifest version {version} (major {m}) is not supported: this cocog reads {MAJOR}.x"
+        ))),
+        None => Err(invalid(format!(
+            "field `version`: expected \"MAJOR.MINOR\", found \"{version}\""
+        ))),
+    }
+}
+
+fn check_pose(m: &[[f64; 4]; 4]) -> Result<(), String> {
+    if m.iter().flatten().any(|v| !v.is_finite()) {
+        return Err("contains NaN or infinite values".to_owned());
+    }
+    if m[3] != [0.0, 0.0, 0.0, 1.0] {
+        return Err(format!("last row must be [0, 0, 0, 1], got {:?}", m[3]));
+    }
+    // R·Rᵀ = I within a tolerance loose enough for f32 round trips.
+    for i in 0..3 {
+        for j in 0..3 {
+            let dot: f64 = (0..3).map(|k| m[i][k] * m[j][k]).sum();
+            let want = if i == j { 1.0 } else { 0.0 };
+            if (dot - want).abs() > 1e-4 {
+                return Err("rotation part is not orthonormal".to_owned());
+            }
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+#[path = "scene_tests.rs"]
+mod tests;
