@@ -1,0 +1,18 @@
+use thiserror::Error;
+
+/// Everything the engine can fail with.
+#[derive(Debug, Error)]
+pub enum EngineError {
+    #[error("no GPU adapter available: {0}")]
+    NoAdapter(String),
+    #[error("no adapter name contains {wanted:?} (COCOG_ADAPTER); available: {available}")]
+    AdapterNotFound { wanted: String, available: String },
+    #[error("adapter {adapter} lacks required capability: {what}")]
+    MissingCapability { adapter: String, what: String },
+    #[error("failed to create device: {0}")]
+    Device(#[from] wgpu::RequestDeviceError),
+    #[error("GPU readback failed: {0}")]
+    Readback(String),
+    #[error("invalid input: {0}")]
+    Invalid(String),
+}

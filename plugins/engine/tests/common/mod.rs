@@ -1,0 +1,102 @@
+//! Shared helpers for the engine's integration tests: a seeded RNG, tiny scenes, cameras.
+#![allow(dead_code)]
+
+use cocog_engine::{Camera, GaussianParams, sh_coeffs_per_channel};
+
+/// SplitMix64: deterministic and dependency-free.
+pub struct Rng(u64);
+
+impl Rng {
+    pub fn new(seed: u64) -> Self {
+        Self(seed)
+    }
+
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in [lo, hi).
+    pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    pub fn range_f32(&mut self, lo: f64, hi: f64) -> f32 {
+        self.range(lo, hi) as f32
+    }
+}
+
+/// A camera with a non-trivial pose: rotated about y and x, translated off the origin.
+pub fn test_camera(width: u32, height: u32, yaw: f64) -> Camera {
+    let (sy, cy) = yaw.sin_cos();
+    let (sx, cx) = 0.1f64.sin_cos();
+    // world_from_camera rotation = Ry(yaw) · Rx(0.1).
+    let ry = [[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]];
+    let rx = [[1.0, 0.0, 0.0], [0.0, cx, -sx], [0.0, sx, cx]];
+    let mut m = [[0.0; 4]; 4];
+    for i in 0..3 {
+        for j in 0..3 {
+            m[i][j] = (0..3).map(|k| ry[i][k] * rx[k][j]).sum();
+        }
+    }
+    m[0][3] = 0.2;
+    m[1][3] = -0.1;
+    m[2][3] = -0.3;
+    m[3][3] = 1.0;
+    Camera {
+        fx: 0.9 * f64::from(width),
+        fy: 0.95 * f64::from(width),
+        cx: 0.5 * f64::from(width) + 0.7,
+        cy: 0.5 * f64::from(height) - 0.4,
+        width,
+        height,
+        world_from_camera: m,
+    }
+}
+
+/// `n` random Gaussians placed in front of `cam` (about 1.5–4 units away), mostly on screen.
+pub fn random_scene(n: usize, sh_degree: u32, seed: u64, cam: &Camera) -> GaussianParams {
+    let mut rng = Rng::new(seed);
+    let m = cam.world_from_camera;
+    let coeffs = sh_coeffs_per_channel(sh_degree);
+    let mut g = GaussianParams {
+        sh_degree,
+        ..Default::default()
+    };
+    for _ in 0..n {
+        let z = rng.range(1.5, 4.0);
+        let x = z * (rng.range(0.0, f64::from(cam.width)) - cam.cx) / cam.fx;
+        let y = z * (rng.range(0.0, f64::from(cam.height)) - cam.cy) / cam.fy;
+        let p = [x, y, z];
+        let world: [f32; 3] = std::array::from_fn(|r| {
+            (m[r][0] * p[0] + m[r][1] * p[1] + m[r][2] * p[2] + m[r][3]) as f32
+        });
+        g.means.push(world);
+        g.log_scales
+            .push(std::array::from_fn(|_| rng.range_f32(-3.2, -1.6)));
+        g.quats
+            .push(std::array::from_fn(|_| rng.range_f32(-1.0, 1.0)));
+        g.opacity_logits.push(rng.range_f32(-1.5, 2.5));
+        for _ in 0..3 {
+            g.sh.push(rng.range_f32(-1.0, 1.5));
+            for _ in 1..coeffs {
+                g.sh.push(rng.range_f32(-0.3, 0.3));
+            }
+        }
+    }
+    g
+}
+
+/// Random per-pixel loss weights: (colour, alpha, depth).
+pub fn random_weights(npix: usize, seed: u64) -> (Vec<[f64; 3]>, Vec<f64>, Vec<f64>) {
+    let mut rng = Rng::new(seed);
+    let c = (0..npix)
+        .map(|_| std::array::from_fn(|_| rng.range(-1.0, 1.0)))
+        .collect();
+    let a = (0..npix).map(|_| rng.range(-1.0, 1.0)).collect();
+    let d = (0..npix).map(|_| rng.range(-0.3, 0.3)).collect();
+    (c, a, d)
+}
