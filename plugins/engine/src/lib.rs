@@ -6,10 +6,12 @@
 //! parameter. `reference` is an f64 CPU implementation of the same maths used for testing.
 
 mod error;
+pub mod gpu;
 pub mod reference;
 mod types;
 
 pub use error::EngineError;
+pub use gpu::{GpuBuffer, GpuContext, MemoryTracker, PrefixSum, RadixSort, Sorted};
 pub use types::{
     ALPHA_MAX, ALPHA_MIN, Camera, GaussianGrads, GaussianParams, LOW_PASS, MAX_SH_DEGREE,
     NEAR_PLANE, T_MIN, TILE_SIZE, View, sh_coeffs_per_channel,
