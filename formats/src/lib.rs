@@ -1,0 +1,11 @@
+//! cocog file formats: COLMAP, LLFF, transforms.json, 3DGS PLY, glTF `KHR_gaussian_splatting`,
+//! single-channel EXR and images. This crate knows nothing of the pipeline; stages convert.
+
+mod atomic;
+mod bytes;
+pub mod colmap;
+pub mod error;
+pub mod pose;
+
+pub use atomic::write_atomic;
+pub use error::{FormatError, Result};
