@@ -21,7 +21,7 @@ mod table;
 
 pub use error::MetricsError;
 pub use image::{FloatImage, load_image};
-pub use lpips::{Lpips, Net, WEIGHTS_ENV, find_weights, weights_dirs};
+pub use lpips::{Lpips, Net, WEIGHTS_ENV, find_weights, find_weights_in, weights_dirs};
 pub use pairs::{IMAGE_EXTENSIONS, ImagePair, pair_dirs};
 pub use report::{
     EvalOptions, ImageScores, LpipsMode, LpipsStatus, Models, Observer, REPORT_FORMAT,

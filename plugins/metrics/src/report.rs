@@ -30,6 +30,8 @@ pub struct EvalOptions {
     pub vgg: bool,
     /// Worker threads for LPIPS; 0 = all cores.
     pub threads: usize,
+    /// Look for LPIPS weights only here instead of [`crate::weights_dirs`].
+    pub weights_dir: Option<PathBuf>,
 }
 
 impl Default for EvalOptions {
@@ -38,6 +40,7 @@ impl Default for EvalOptions {
             lpips: LpipsMode::Auto,
             vgg: false,
             threads: 0,
+            weights_dir: None,
         }
     }
 }
@@ -153,7 +156,11 @@ impl Models {
             &[Net::Alex]
         };
         for &net in nets {
-            let model = match Lpips::load(net) {
+            let loaded = match &opts.weights_dir {
+                Some(dir) => Lpips::load_from_dir(dir, net),
+                None => Lpips::load(net),
+            };
+            let model = match loaded {
                 Ok(m) => m.with_threads(opts.threads),
                 // Only absence is tolerated in auto mode; a present but broken file is an error.
                 Err(e @ MetricsError::WeightsNotFound { .. }) if opts.lpips == LpipsMode::Auto => {

@@ -9,7 +9,7 @@ mod weights;
 use std::path::{Path, PathBuf};
 
 pub use net::Net;
-pub use weights::{WEIGHTS_ENV, find_weights, weights_dirs};
+pub use weights::{WEIGHTS_ENV, find_weights, find_weights_in, weights_dirs};
 
 use self::net::{Op, SCALE, SHIFT};
 use self::tensor::{Conv, Tensor};
@@ -30,6 +30,11 @@ impl Lpips {
     /// Loads `net`'s weights from the first weights folder that has them (see [`weights_dirs`]).
     pub fn load(net: Net) -> Result<Self, MetricsError> {
         Self::from_file(&find_weights(net)?, net)
+    }
+
+    /// Loads `net`'s weights from the folder `dir` only.
+    pub fn load_from_dir(dir: &Path, net: Net) -> Result<Self, MetricsError> {
+        Self::from_file(&find_weights_in(&[dir.to_path_buf()], net)?, net)
     }
 
     /// Loads a specific converted weights file.

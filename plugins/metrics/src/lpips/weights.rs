@@ -57,8 +57,12 @@ pub fn weights_dirs() -> Vec<PathBuf> {
 
 /// The weights file for `net`, from the first folder of [`weights_dirs`] that has one.
 pub fn find_weights(net: Net) -> Result<PathBuf, MetricsError> {
-    let dirs = weights_dirs();
-    for dir in &dirs {
+    find_weights_in(&weights_dirs(), net)
+}
+
+/// The weights file for `net` from the first of `dirs` that has one.
+pub fn find_weights_in(dirs: &[PathBuf], net: Net) -> Result<PathBuf, MetricsError> {
+    for dir in dirs {
         let file = dir.join(net.file_name());
         if file.is_file() {
             return Ok(file);
