@@ -5,6 +5,8 @@ mod atomic;
 mod bytes;
 pub mod colmap;
 pub mod error;
+pub mod llff;
+pub mod nerf;
 pub mod pose;
 
 pub use atomic::write_atomic;
