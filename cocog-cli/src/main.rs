@@ -1,1 +1,102 @@
-fn main() {}
+//! `cocog`: parses the command line, assembles the stage registry and runs stages.
+//! No algorithms live here.
+
+mod builtins;
+mod cli;
+mod commands;
+mod demo;
+mod plugins;
+mod progress;
+
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use clap::Parser;
+use cocog_pipeline::LogLevel;
+use cocog_pipeline::registry::RegistryError;
+use cocog_pipeline::runner::RunError;
+
+use crate::cli::Cli;
+use crate::progress::CliContext;
+
+/// Exit codes: documented in `cocog --help`.
+pub mod exit {
+    pub const FAILURE: u8 = 1;
+    pub const USAGE: u8 = 2;
+    pub const UNAVAILABLE: u8 = 3;
+    pub const CANCELLED: u8 = 130;
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let level = if cli.global.quiet {
+        LogLevel::Warn
+    } else if cli.global.verbose {
+        LogLevel::Debug
+    } else {
+        LogLevel::Info
+    };
+    // One line instead of a backtrace; the stage runner turns the panic into an error
+    // that names the stage. RUST_BACKTRACE still gets the full trace.
+    if std::env::var_os("RUST_BACKTRACE").is_none() {
+        std::panic::set_hook(Box::new(|info| eprintln!("internal error: {info}")));
+    }
+    let cancel = Arc::new(AtomicBool::new(false));
+    let flag = Arc::clone(&cancel);
+    // First Ctrl-C asks the stage to stop cleanly (its staging output is removed); a
+    // second one exits at once.
+    let _ = ctrlc::set_handler(move || {
+        if flag.swap(true, Ordering::SeqCst) {
+            std::process::exit(i32::from(exit::CANCELLED));
+        }
+        eprintln!("\ncancelling: finishing the current step (Ctrl-C again to abort)");
+    });
+    let ctx = CliContext::new(level, cancel);
+    match commands::dispatch(&cli, &ctx) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {}", one_line(&e));
+            ExitCode::from(exit_code(&e))
+        }
+    }
+}
+
+/// The whole cause chain on one line, without repeating a cause already in the message.
+fn one_line(e: &anyhow::Error) -> String {
+    let mut s = String::new();
+    for cause in e.chain() {
+        let t = cause.to_string();
+        if s.contains(&t) {
+            continue;
+        }
+        if !s.is_empty() {
+            s.push_str(": ");
+        }
+        s.push_str(&t);
+    }
+    s
+}
+
+fn exit_code(e: &anyhow::Error) -> u8 {
+    for cause in e.chain() {
+        if let Some(r) = cause.downcast_ref::<RunError>() {
+            if r.is_cancelled() {
+                return exit::CANCELLED;
+            }
+            if let RunError::Registry(RegistryError::Unknown { .. }) = r {
+                return exit::UNAVAILABLE;
+            }
+        }
+        if let Some(RegistryError::Unknown { .. }) = cause.downcast_ref::<RegistryError>() {
+            return exit::UNAVAILABLE;
+        }
+        if cause.downcast_ref::<commands::Unavailable>().is_some() {
+            return exit::UNAVAILABLE;
+        }
+        if cause.downcast_ref::<commands::UsageError>().is_some() {
+            return exit::USAGE;
+        }
+    }
+    exit::FAILURE
+}

@@ -140,7 +140,10 @@ impl Registry {
             .map(|i| &self.entries[i])
             .ok_or_else(|| RegistryError::Unknown {
                 name: name.to_owned(),
-                available: self.names().join(", "),
+                available: match self.names() {
+                    n if n.is_empty() => "none".to_owned(),
+                    n => n.join(", "),
+                },
             })
     }
 

@@ -3,7 +3,9 @@
 //! Every entry point catches panics: unwinding across `extern "C"` aborts the process,
 //! and a plugin bug must become an error for the host, never a crash.
 
+use std::cell::RefCell;
 use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::sync::Once;
 
 use serde::Deserialize;
 use serde_json::{Value, json};
@@ -77,6 +79,7 @@ pub unsafe fn run(
     host: *const HostCallbacks,
     out: *mut OwnedBuf,
 ) -> i32 {
+    quiet_panics();
     // SAFETY: guaranteed by the caller.
     let bytes = unsafe { request.as_bytes() };
     // SAFETY: guaranteed by the caller; the host outlives this call.
@@ -100,7 +103,13 @@ pub unsafe fn run(
         Ok(Ok(v)) => (RunStatus::Ok, v),
         Ok(Err(StageError::Cancelled)) => (RunStatus::Cancelled, json!({ "error": "cancelled" })),
         Ok(Err(e)) => (RunStatus::Error, json!({ "error": error_chain(&e) })),
-        Err(p) => (RunStatus::Panicked, json!({ "error": panic_text(&*p) })),
+        Err(p) => {
+            let located = LAST_PANIC.with(|l| l.borrow_mut().take());
+            (
+                RunStatus::Panicked,
+                json!({ "error": located.unwrap_or_else(|| panic_text(&*p)) }),
+            )
+        }
     };
     // SAFETY: `out` is writable per the contract.
     unsafe { out.write(OwnedBuf::from_vec(body.to_string().into_bytes())) };
@@ -114,6 +123,27 @@ pub unsafe fn run(
 pub unsafe extern "C" fn free(buf: OwnedBuf) {
     // SAFETY: per the contract, the buffer was made by `OwnedBuf::from_vec` here.
     drop(unsafe { buf.into_vec() });
+}
+
+thread_local! {
+    static LAST_PANIC: RefCell<Option<String>> = const { RefCell::new(None) };
+}
+
+/// The plugin has its own copy of std and so its own panic hook. Instead of printing a
+/// backtrace into the host's terminal, remember the message and location; the host
+/// reports them as a one-line error.
+fn quiet_panics() {
+    static HOOK: Once = Once::new();
+    HOOK.call_once(|| {
+        std::panic::set_hook(Box::new(|info| {
+            let text = panic_text(info.payload());
+            let located = match info.location() {
+                Some(l) => format!("{text} (at {}:{})", l.file(), l.line()),
+                None => text,
+            };
+            LAST_PANIC.with(|l| *l.borrow_mut() = Some(located));
+        }));
+    });
 }
 
 fn error_chain(e: &dyn std::error::Error) -> String {

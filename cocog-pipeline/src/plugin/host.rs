@@ -198,17 +198,14 @@ impl Stage for PluginStage {
         };
         match status {
             0 => Ok(value),
-            1 => Err(StageError::Input(format!(
-                "{path}: stage '{stage}' failed: {}",
-                message()
-            ))),
+            1 => Err(StageError::Input(format!("{} [plugin {path}]", message()))),
             2 => Err(StageError::Cancelled),
             3 => Err(StageError::Input(format!(
-                "{path}: stage '{stage}' panicked: {}",
+                "panicked: {} [plugin {path}]",
                 message()
             ))),
             s => Err(StageError::Input(format!(
-                "{path}: stage '{stage}' returned unknown status {s}: {}",
+                "unknown status {s} from stage '{stage}': {} [plugin {path}]",
                 message()
             ))),
         }

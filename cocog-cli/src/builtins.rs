@@ -1,0 +1,27 @@
+//! The stages linked into the `cocog` binary.
+
+use cocog_pipeline::Registry;
+
+/// Stages that will exist but are not built yet, with what brings them: `cocog` names
+/// them in its error instead of a bare "unknown stage".
+pub const PLANNED: &[(&str, &str)] = &[
+    ("ingest-colmap", "the format toolkit (issue #3)"),
+    ("ingest-llff", "the format toolkit (issue #3)"),
+    ("ingest-nerf", "the format toolkit (issue #3)"),
+    ("densify", "the format toolkit (issue #3)"),
+    ("prune", "the format toolkit (issue #3)"),
+    ("export", "the format toolkit (issue #3)"),
+    ("convert", "the format toolkit (issue #3)"),
+    ("eval", "the metrics crate (issue #4)"),
+    ("train", "the GPU engine (issue #5)"),
+    ("render", "the GPU engine (issue #5)"),
+];
+
+/// What brings a planned stage, if `name` is one.
+pub fn planned(name: &str) -> Option<&'static str> {
+    PLANNED.iter().find(|(n, _)| *n == name).map(|(_, by)| *by)
+}
+
+pub fn register(registry: &mut Registry) {
+    let _ = registry;
+}

@@ -1,0 +1,258 @@
+//! The command line, as clap sees it. Every stage subcommand maps onto a stage name and a
+//! JSON options object; options left out are filled by the stage's own defaults.
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+
+#[derive(Parser)]
+#[command(
+    name = "cocog",
+    version,
+    about = "Sharp 3D Gaussian Splatting scenes from photos with depth-of-field blur (CoCoGaussian)",
+    long_about = "cocog turns photographs with depth-of-field blur into sharp 3D Gaussian Splatting \
+scenes. Each stage reads a scene directory and writes a new one, so stages chain in shell scripts:\n\n  \
+cocog ingest llff data/table -o s1\n  cocog densify s1 -o s2\n  cocog train s2 -o s3\n  \
+cocog export s3 --format ply -o table.ply\n\n\
+Results go to stdout (the output path, or JSON with --json); logs and progress go to stderr. \
+Outputs are written beside their target and renamed into place, so a failed run leaves nothing \
+half-written. Exit codes: 0 success, 1 failure, 2 usage error, 3 stage not available, 130 cancelled.",
+    after_help = "Run `cocog demo` for a complete example, and `cocog plugins` to list every stage."
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+    #[command(flatten)]
+    pub global: Global,
+}
+
+#[derive(Args)]
+pub struct Global {
+    /// Directory (or library file) to load plugins from; repeatable. Also read from
+    /// COCOG_PLUGIN_PATH (a path list).
+    #[arg(long = "plugin-path", global = true, value_name = "DIR")]
+    pub plugin_path: Vec<PathBuf>,
+    /// Run STAGE from PLUGIN instead of the built-in: a plugin name or a library path;
+    /// repeatable, e.g. --use train=./libmy_trainer.so
+    #[arg(long = "use", global = true, value_name = "STAGE=PLUGIN")]
+    pub use_plugin: Vec<String>,
+    /// Replace the output if it already exists.
+    #[arg(long, global = true)]
+    pub force: bool,
+    /// Print the stage's result as JSON on stdout instead of the output path.
+    #[arg(long, global = true)]
+    pub json: bool,
+    /// Only warnings and errors on stderr, no progress bars.
+    #[arg(short, long, global = true, conflicts_with = "verbose")]
+    pub quiet: bool,
+    /// Debug logs on stderr.
+    #[arg(short, long, global = true)]
+    pub verbose: bool,
+}
+
+#[derive(Subcommand)]
+pub enum Command {
+    /// Read a dataset (COLMAP, NeRF-LLFF or transforms.json) into a new scene directory.
+    Ingest(IngestArgs),
+    /// Add extra points in the scene's bounding box, coloured from their nearest neighbours.
+    Densify(DensifyArgs),
+    /// Train Gaussians: CoCoGaussian on defocused photos, or plain 3DGS.
+    Train(TrainArgs),
+    /// Remove Gaussians whose depth-weighted opacity is too low.
+    Prune(SceneToScene),
+    /// Write the trained Gaussians to a file other tools open (PLY, glTF).
+    Export(ExportArgs),
+    /// Render the scene's views to PNG (sharp, or refocused with a chosen lens).
+    Render(RenderArgs),
+    /// Score images: PSNR, SSIM (both conventions), LPIPS.
+    Eval(EvalArgs),
+    /// Write a scene as a COLMAP text model or a transforms.json dataset.
+    Convert(ConvertArgs),
+    /// Run any stage by name, e.g. one provided by a plugin.
+    Stage(StageArgs),
+    /// Run a chain of stages described by a pipeline file.
+    Run(RunArgs),
+    /// List every stage, who provides it, from which file and ABI version.
+    Plugins,
+    /// Run the main job end to end on a small scene that ships with cocog.
+    Demo(DemoArgs),
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+pub enum DatasetFormat {
+    /// A COLMAP sparse model (sparse/N/{cameras,images,points3D}.{bin,txt}) and images/.
+    Colmap,
+    /// NeRF-LLFF poses_bounds.npy with images/ (and images_N/), e.g. Deblur-NeRF data.
+    Llff,
+    /// A transforms.json dataset (NeRF-synthetic or nerfstudio).
+    Nerf,
+}
+
+#[derive(Args)]
+pub struct IngestArgs {
+    #[arg(value_enum)]
+    pub format: DatasetFormat,
+    /// The dataset directory.
+    pub dataset: PathBuf,
+    /// The scene directory to create.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Use images downscaled by N (LLFF images_N/ when present, else resampled). Default 1.
+    #[arg(long)]
+    pub downscale: Option<u32>,
+    /// Test split: every N-th view after sorting names. Default: the dataset's hold=N
+    /// marker, else 8.
+    #[arg(long)]
+    pub hold: Option<u32>,
+    /// COLMAP: which sparse/N model to use. Default: the one with most images.
+    #[arg(long)]
+    pub model: Option<u32>,
+}
+
+#[derive(Args)]
+pub struct SceneToScene {
+    /// The input scene directory.
+    pub scene: PathBuf,
+    /// The scene directory to create.
+    #[arg(short, long)]
+    pub output: PathBuf,
+}
+
+#[derive(Args)]
+pub struct DensifyArgs {
+    #[command(flatten)]
+    pub io: SceneToScene,
+    /// How many candidate points to add (Deblurring-3DGS uses about 200k).
+    #[arg(long)]
+    pub points: Option<u64>,
+    /// Random seed for the candidate points.
+    #[arg(long)]
+    pub seed: Option<u64>,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+pub enum Method {
+    /// CoCoGaussian: circle-of-confusion Gaussians, for photos with depth-of-field blur.
+    Cocog,
+    /// Plain 3D Gaussian Splatting, for sharp photos.
+    #[value(name = "3dgs")]
+    Gs3d,
+}
+
+#[derive(Args)]
+pub struct TrainArgs {
+    #[command(flatten)]
+    pub io: SceneToScene,
+    #[arg(long, value_enum)]
+    pub method: Option<Method>,
+    /// Training iterations (the paper uses 30000).
+    #[arg(long)]
+    pub iterations: Option<u64>,
+    /// CoC Gaussians per base Gaussian, M (the paper uses 5).
+    #[arg(long = "coc-gaussians")]
+    pub coc_gaussians: Option<u64>,
+    /// Train on images downscaled by N.
+    #[arg(long)]
+    pub downscale: Option<u32>,
+    /// Random seed.
+    #[arg(long)]
+    pub seed: Option<u64>,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+pub enum ExportFormat {
+    /// INRIA 3DGS PLY: opens in SuperSplat, Spark, Brush, three.js, Babylon.js.
+    Ply,
+    /// glTF binary with KHR_gaussian_splatting.
+    Glb,
+    /// Niantic SPZ.
+    Spz,
+}
+
+#[derive(Args)]
+pub struct ExportArgs {
+    pub scene: PathBuf,
+    #[arg(long, value_enum)]
+    pub format: ExportFormat,
+    /// The file to write.
+    #[arg(short, long)]
+    pub output: PathBuf,
+}
+
+#[derive(Args)]
+pub struct RenderArgs {
+    #[command(flatten)]
+    pub io: SceneToScene,
+    /// Which views: test, train or all.
+    #[arg(long)]
+    pub split: Option<String>,
+    /// Refocus: plane in focus, in scene units.
+    #[arg(long = "focus-distance")]
+    pub focus_distance: Option<f64>,
+    /// Refocus: aperture scale K of the CoC model.
+    #[arg(long)]
+    pub aperture: Option<f64>,
+    /// Also write depth maps (EXR).
+    #[arg(long)]
+    pub depth: bool,
+}
+
+#[derive(Args)]
+pub struct EvalArgs {
+    /// A scene to render and score (needs a trained scene).
+    pub scene: Option<PathBuf>,
+    /// A folder of predicted images (instead of a scene).
+    #[arg(long, requires = "gt", conflicts_with = "scene")]
+    pub pred: Option<PathBuf>,
+    /// The folder of ground-truth images, matched to --pred by file name.
+    #[arg(long)]
+    pub gt: Option<PathBuf>,
+    /// Where to write metrics.json. Default: metrics.json inside the --pred folder.
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+pub enum ConvertTarget {
+    /// A COLMAP text model (cameras.txt, images.txt, points3D.txt).
+    Colmap,
+    /// transforms.json with OpenGL camera-to-world matrices.
+    Nerf,
+}
+
+#[derive(Args)]
+pub struct ConvertArgs {
+    pub scene: PathBuf,
+    #[arg(long, value_enum)]
+    pub to: ConvertTarget,
+    #[arg(short, long)]
+    pub output: PathBuf,
+}
+
+#[derive(Args)]
+pub struct StageArgs {
+    /// The stage name (see `cocog plugins`).
+    pub name: String,
+    /// The input: a scene directory, or a dataset for ingest stages.
+    pub input: PathBuf,
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// A stage option, KEY=VALUE; VALUE is read as JSON when it parses (numbers, true),
+    /// else as a string. Repeatable.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
+}
+
+#[derive(Args)]
+pub struct RunArgs {
+    /// The pipeline file (TOML): [pipeline] input, output, stages, plus one table of
+    /// options per stage.
+    pub pipeline: PathBuf,
+}
+
+#[derive(Args)]
+pub struct DemoArgs {
+    /// Where to put the demo's dataset and scenes.
+    #[arg(short, long, default_value = "cocog-demo")]
+    pub output: PathBuf,
+}

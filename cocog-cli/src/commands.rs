@@ -1,0 +1,221 @@
+//! Maps each subcommand onto a stage name and its options, then runs it.
+
+use std::fmt;
+use std::path::Path;
+
+use anyhow::{Context as _, Result};
+use cocog_pipeline::plugin::plugin_dirs;
+use cocog_pipeline::registry::RegistryError;
+use cocog_pipeline::runner::{run_pipeline, run_stage};
+use cocog_pipeline::{Context, Registry, StageEntry};
+use serde_json::{Map, Value};
+
+use crate::builtins;
+use crate::cli::{Cli, Command, ConvertTarget, DatasetFormat, ExportFormat, Global, Method};
+use crate::{demo, plugins};
+
+/// A mistake on the command line that clap cannot see (exit code 2).
+#[derive(Debug)]
+pub struct UsageError(pub String);
+
+impl fmt::Display for UsageError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for UsageError {}
+
+/// A stage this build does not have (exit code 3).
+#[derive(Debug)]
+pub struct Unavailable(pub String);
+
+impl fmt::Display for Unavailable {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for Unavailable {}
+
+/// Builds an options object from the flags the user actually gave.
+macro_rules! options {
+    ($($key:literal => $val:expr),* $(,)?) => {{
+        #[allow(unused_mut)]
+        let mut m = Map::new();
+        $(if let Some(v) = $val { m.insert($key.to_owned(), Value::from(v)); })*
+        m
+    }};
+}
+
+pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
+    let g = &cli.global;
+    let registry = build_registry(g, ctx, matches!(cli.command, Command::Plugins))?;
+    let run = |name: &str, input: &Path, output: &Path, options: Map<String, Value>| {
+        run_named(&registry, name, input, output, &options, g, ctx)
+    };
+    match &cli.command {
+        Command::Ingest(a) => {
+            let name = match a.format {
+                DatasetFormat::Colmap => "ingest-colmap",
+                DatasetFormat::Llff => "ingest-llff",
+                DatasetFormat::Nerf => "ingest-nerf",
+            };
+            let o = options! { "downscale" => a.downscale, "hold" => a.hold, "model" => a.model };
+            run(name, &a.dataset, &a.output, o)
+        }
+        Command::Densify(a) => {
+            let o = options! { "points" => a.points, "seed" => a.seed };
+            run("densify", &a.io.scene, &a.io.output, o)
+        }
+        Command::Train(a) => {
+            let method = a.method.map(|m| match m {
+                Method::Cocog => "cocog",
+                Method::Gs3d => "3dgs",
+            });
+            let o = options! {
+                "method" => method, "iterations" => a.iterations,
+                "coc_gaussians" => a.coc_gaussians, "downscale" => a.downscale, "seed" => a.seed,
+            };
+            run("train", &a.io.scene, &a.io.output, o)
+        }
+        Command::Prune(a) => run("prune", &a.scene, &a.output, Map::new()),
+        Command::Export(a) => {
+            let format = match a.format {
+                ExportFormat::Ply => "ply",
+                ExportFormat::Glb => "glb",
+                ExportFormat::Spz => "spz",
+            };
+            run(
+                "export",
+                &a.scene,
+                &a.output,
+                options! { "format" => Some(format) },
+            )
+        }
+        Command::Render(a) => {
+            let o = options! {
+                "split" => a.split.clone(), "focus_distance" => a.focus_distance,
+                "aperture" => a.aperture, "depth" => a.depth.then_some(true),
+            };
+            run("render", &a.io.scene, &a.io.output, o)
+        }
+        Command::Eval(a) => eval(&registry, a, g, ctx),
+        Command::Convert(a) => {
+            let to = match a.to {
+                ConvertTarget::Colmap => "colmap",
+                ConvertTarget::Nerf => "nerf",
+            };
+            run(
+                "convert",
+                &a.scene,
+                &a.output,
+                options! { "to" => Some(to) },
+            )
+        }
+        Command::Stage(a) => {
+            let mut o = Map::new();
+            for kv in &a.set {
+                let (k, v) = kv
+                    .split_once('=')
+                    .ok_or_else(|| UsageError(format!("--set {kv}: expected KEY=VALUE")))?;
+                let value = serde_json::from_str(v).unwrap_or_else(|_| Value::from(v));
+                o.insert(k.to_owned(), value);
+            }
+            run(&a.name, &a.input, &a.output, o)
+        }
+        Command::Run(a) => {
+            let summary = run_pipeline(&registry, &a.pipeline, g.force, ctx)
+                .with_context(|| format!("pipeline {}", a.pipeline.display()))?;
+            let out = summary.get("output").and_then(Value::as_str).unwrap_or("");
+            print_result(g, &summary, Path::new(out))
+        }
+        Command::Plugins => plugins::list(&registry, g.json),
+        Command::Demo(a) => demo::run(&registry, a, g, ctx),
+    }
+}
+
+fn build_registry(g: &Global, ctx: &dyn Context, listing: bool) -> Result<Registry> {
+    let mut registry = Registry::new();
+    builtins::register(&mut registry);
+    registry.load_plugins(&plugin_dirs(&g.plugin_path));
+    // `cocog plugins` reports broken libraries itself, in its table.
+    if !listing {
+        for e in &registry.load_errors {
+            ctx.warn(&format!("skipping plugin: {e}"));
+        }
+    }
+    for spec in &g.use_plugin {
+        registry.use_plugin(spec)?;
+    }
+    Ok(registry)
+}
+
+/// Finds a stage, explaining which part of cocog brings a stage that is not built yet.
+pub fn resolve<'a>(registry: &'a Registry, name: &str) -> Result<&'a StageEntry> {
+    match registry.resolve(name) {
+        Ok(e) => Ok(e),
+        Err(RegistryError::Unknown { .. }) if builtins::planned(name).is_some() => {
+            let by = builtins::planned(name).unwrap_or_default();
+            Err(Unavailable(format!(
+                "stage '{name}' is not built into this cocog yet (it arrives with {by}); \
+                 a plugin can provide it with --use {name}=PLUGIN"
+            ))
+            .into())
+        }
+        Err(e) => Err(e.into()),
+    }
+}
+
+pub fn run_named(
+    registry: &Registry,
+    name: &str,
+    input: &Path,
+    output: &Path,
+    options: &Map<String, Value>,
+    g: &Global,
+    ctx: &dyn Context,
+) -> Result<()> {
+    let entry = resolve(registry, name)?;
+    let summary = run_stage(entry, input, output, options, g.force, ctx)?;
+    print_result(g, &summary, output)
+}
+
+fn eval(
+    registry: &Registry,
+    a: &crate::cli::EvalArgs,
+    g: &Global,
+    ctx: &dyn Context,
+) -> Result<()> {
+    match (&a.scene, &a.pred, &a.gt) {
+        (None, Some(pred), Some(gt)) => {
+            let output = a
+                .output
+                .clone()
+                .unwrap_or_else(|| pred.join("metrics.json"));
+            let o = options! { "gt" => Some(gt.display().to_string()) };
+            // Re-scoring a folder replaces its own default metrics file.
+            let force = g.force || a.output.is_none();
+            let entry = resolve(registry, "eval")?;
+            let summary = run_stage(entry, pred, &output, &o, force, ctx)?;
+            print_result(g, &summary, &output)
+        }
+        (Some(scene), None, _) => {
+            let output = a
+                .output
+                .clone()
+                .unwrap_or_else(|| scene.join("metrics.json"));
+            run_named(registry, "eval-scene", scene, &output, &Map::new(), g, ctx)
+        }
+        _ => Err(UsageError("eval needs a SCENE, or --pred DIR --gt DIR".to_owned()).into()),
+    }
+}
+
+pub fn print_result(g: &Global, summary: &Value, output: &Path) -> Result<()> {
+    if g.json {
+        println!("{}", serde_json::to_string_pretty(summary)?);
+    } else {
+        println!("{}", output.display());
+    }
+    Ok(())
+}

@@ -1,0 +1,95 @@
+//! Support for the end-to-end tests: build the `cocog` binary and plugin libraries with
+//! the same cargo and profile as the test itself, and run them.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::Mutex;
+
+/// `target/<profile>`: the test binary lives in `target/<profile>/deps/`.
+pub fn target_dir() -> PathBuf {
+    let exe = std::env::current_exe().expect("test executable path");
+    exe.parent()
+        .and_then(Path::parent)
+        .expect("test binary sits in target/<profile>/deps")
+        .to_path_buf()
+}
+
+fn profile() -> String {
+    target_dir()
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "debug".to_owned())
+}
+
+static BUILD: Mutex<()> = Mutex::new(());
+
+/// Builds workspace packages (a no-op when `cargo test --workspace` already did).
+pub fn build(packages: &[&str]) {
+    let _guard = BUILD.lock().unwrap_or_else(|e| e.into_inner());
+    let profile = profile();
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_owned());
+    let mut cmd = Command::new(cargo);
+    cmd.arg("build").arg("--quiet");
+    cmd.arg("--profile")
+        .arg(if profile == "debug" { "dev" } else { &profile });
+    for p in packages {
+        cmd.arg("-p").arg(p);
+    }
+    cmd.current_dir(env!("CARGO_MANIFEST_DIR"));
+    let status = cmd.status().expect("run cargo build");
+    assert!(status.success(), "cargo build {packages:?} failed");
+}
+
+/// Path of the `cocog` binary, built if needed.
+pub fn cocog_bin() -> PathBuf {
+    build(&["cocog-cli"]);
+    target_dir().join(format!("cocog{}", std::env::consts::EXE_SUFFIX))
+}
+
+/// Path of a workspace cdylib, built if needed. `package` is the Cargo package name.
+pub fn cdylib(package: &str) -> PathBuf {
+    build(&[package]);
+    let stem = package.replace('-', "_");
+    target_dir().join(format!(
+        "{}{stem}{}",
+        std::env::consts::DLL_PREFIX,
+        std::env::consts::DLL_SUFFIX
+    ))
+}
+
+/// Runs `cocog` with `args`, without plugin paths from the caller's environment.
+pub fn cocog(args: &[&str]) -> Output {
+    Command::new(cocog_bin())
+        .args(args)
+        .env_remove("COCOG_PLUGIN_PATH")
+        .env_remove("RUST_BACKTRACE")
+        .output()
+        .expect("run cocog")
+}
+
+pub fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+pub fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// Names in `dir`, sorted: to check nothing half-written was left behind.
+pub fn listing(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .map(|rd| {
+            rd.filter_map(Result::ok)
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .collect()
+        })
+        .unwrap_or_default();
+    v.sort();
+    v
+}
+
+/// `../shared` beside the workspace, if this checkout has it.
+pub fn shared_dir() -> Option<PathBuf> {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared");
+    p.is_dir().then(|| p.canonicalize().unwrap_or(p))
+}
