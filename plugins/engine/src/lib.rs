@@ -11,7 +11,10 @@ pub mod reference;
 mod types;
 
 pub use error::EngineError;
-pub use gpu::{GpuBuffer, GpuContext, MemoryTracker, PrefixSum, RadixSort, Sorted};
+pub use gpu::{
+    Batch, ForwardState, GpuBuffer, GpuContext, ImageSpec, MemoryTracker, ParamBuffers, PrefixSum,
+    RadixSort, RenderedImage, Renderer, SortBuffers,
+};
 pub use types::{
     ALPHA_MAX, ALPHA_MIN, Camera, GaussianGrads, GaussianParams, LOW_PASS, MAX_SH_DEGREE,
     NEAR_PLANE, T_MIN, TILE_SIZE, View, sh_coeffs_per_channel,

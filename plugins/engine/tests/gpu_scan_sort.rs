@@ -3,7 +3,7 @@
 
 mod common;
 
-use cocog_engine::{PrefixSum, RadixSort};
+use cocog_engine::{PrefixSum, RadixSort, SortBuffers};
 use common::{Rng, gpu};
 
 fn random_u32(n: usize, modulo: u32, seed: u64) -> Vec<u32> {
@@ -40,24 +40,17 @@ fn check_sort(n: usize, modulo: u32, bits: u32, seed: u64) {
     let sort = RadixSort::new(ctx);
     let keys = random_u32(n, modulo, seed);
     let values: Vec<u32> = (0..n as u32).collect();
-    let bufs = [
+    let mut bufs = SortBuffers::new(
+        ctx,
         ctx.storage_from("keys", &keys),
         ctx.storage_from("values", &values),
-        ctx.storage("keys tmp", n as u64 * 4),
-        ctx.storage("values tmp", n as u64 * 4),
-    ];
-    let mut enc = ctx.device.create_command_encoder(&Default::default());
-    let sorted = sort.encode(
-        ctx,
-        &scan,
-        &mut enc,
-        [&bufs[0], &bufs[1], &bufs[2], &bufs[3]],
         n as u32,
-        bits,
     );
+    let mut enc = ctx.device.create_command_encoder(&Default::default());
+    sort.encode(ctx, &scan, &mut enc, &mut bufs, n as u32, bits);
     ctx.queue.submit([enc.finish()]);
-    let got_keys: Vec<u32> = ctx.read(sorted.keys, n).unwrap();
-    let got_values: Vec<u32> = ctx.read(sorted.values, n).unwrap();
+    let got_keys: Vec<u32> = ctx.read(&bufs.keys, n).unwrap();
+    let got_values: Vec<u32> = ctx.read(&bufs.values, n).unwrap();
     // Stable sort on the low `bits` bits: ties keep their input order.
     let mask = if bits >= 32 {
         u32::MAX

@@ -80,7 +80,7 @@ impl GpuContext {
     /// Storage buffer holding `data` (padded to at least 16 bytes).
     pub fn storage_from<T: bytemuck::Pod>(&self, label: &str, data: &[T]) -> GpuBuffer {
         let bytes: &[u8] = bytemuck::cast_slice(data);
-        if bytes.len() < 16 || bytes.len() % 4 != 0 {
+        if bytes.len() < 16 || !bytes.len().is_multiple_of(4) {
             let mut padded = bytes.to_vec();
             padded.resize(bytes.len().max(16).next_multiple_of(4), 0);
             return self.storage_bytes(label, &padded);
@@ -120,7 +120,18 @@ impl GpuContext {
         buffer: &wgpu::Buffer,
         len: usize,
     ) -> Result<Vec<T>, EngineError> {
+        self.read_at(buffer, 0, len)
+    }
+
+    /// Copies elements `[first, first + len)` of `buffer` back to the CPU.
+    pub fn read_at<T: bytemuck::Pod>(
+        &self,
+        buffer: &wgpu::Buffer,
+        first: usize,
+        len: usize,
+    ) -> Result<Vec<T>, EngineError> {
         let bytes = (len * size_of::<T>()) as u64;
+        let offset = (first * size_of::<T>()) as u64;
         if bytes == 0 {
             return Ok(Vec::new());
         }
@@ -131,7 +142,7 @@ impl GpuContext {
             mapped_at_creation: false,
         });
         let mut encoder = self.device.create_command_encoder(&Default::default());
-        encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, bytes.next_multiple_of(4));
+        encoder.copy_buffer_to_buffer(buffer, offset, &staging, 0, bytes.next_multiple_of(4));
         self.queue.submit([encoder.finish()]);
         let (tx, rx) = std::sync::mpsc::channel();
         staging.slice(..).map_async(wgpu::MapMode::Read, move |r| {

@@ -6,7 +6,7 @@ use super::buffers::MemoryTracker;
 use crate::EngineError;
 
 /// Storage buffers the widest kernel (projection backward) binds at once.
-pub(crate) const REQUIRED_STORAGE_BUFFERS: u32 = 10;
+pub(crate) const REQUIRED_STORAGE_BUFFERS: u32 = 12;
 /// The rasterizer stages one batch of 256 projected Gaussians (48 B each) in shared memory.
 pub(crate) const REQUIRED_WORKGROUP_STORAGE: u32 = 16 * 1024;
 

@@ -1,12 +1,16 @@
 //! The wgpu side of the engine.
 
+mod batch;
 mod buffers;
 mod context;
 mod kernel;
+mod renderer;
 mod scan;
 mod sort;
 
+pub use batch::{Batch, ImageSpec, ParamBuffers};
 pub use buffers::{GpuBuffer, MemoryTracker};
 pub use context::GpuContext;
+pub use renderer::{ForwardState, RenderedImage, Renderer};
 pub use scan::PrefixSum;
-pub use sort::{RadixSort, Sorted};
+pub use sort::{RadixSort, SortBuffers};

@@ -23,10 +23,25 @@ pub struct RadixSort {
     scatter: Kernel,
 }
 
-/// Where the sorted pairs ended up after an even or odd number of passes.
-pub struct Sorted<'a> {
-    pub keys: &'a GpuBuffer,
-    pub values: &'a GpuBuffer,
+/// Pairs to sort plus equally sized scratch; after a sort `keys`/`values` hold the result.
+#[derive(Debug)]
+pub struct SortBuffers {
+    pub keys: GpuBuffer,
+    pub values: GpuBuffer,
+    pub keys_tmp: GpuBuffer,
+    pub values_tmp: GpuBuffer,
+}
+
+impl SortBuffers {
+    /// Scratch for `n` pairs around the given keys and values.
+    pub fn new(ctx: &GpuContext, keys: GpuBuffer, values: GpuBuffer, n: u32) -> Self {
+        Self {
+            keys,
+            values,
+            keys_tmp: ctx.storage("sort keys tmp", u64::from(n) * 4),
+            values_tmp: ctx.storage("sort values tmp", u64::from(n) * 4),
+        }
+    }
 }
 
 impl RadixSort {
@@ -38,18 +53,17 @@ impl RadixSort {
         }
     }
 
-    /// Records a sort of the first `n` pairs on the low `bits` key bits, ping-ponging between
-    /// `(keys, values)` and `(keys_tmp, values_tmp)`; returns the pair holding the result.
-    pub fn encode<'a>(
+    /// Records a stable sort of the first `n` pairs on the low `bits` key bits. Passes
+    /// ping-pong through the scratch buffers, swapped back so the result is in `keys`/`values`.
+    pub fn encode(
         &self,
         ctx: &GpuContext,
         prefix_sum: &PrefixSum,
         encoder: &mut wgpu::CommandEncoder,
-        buffers: [&'a GpuBuffer; 4],
+        bufs: &mut SortBuffers,
         n: u32,
         bits: u32,
-    ) -> Sorted<'a> {
-        let [mut keys, mut values, mut keys_tmp, mut values_tmp] = buffers;
+    ) {
         if n > 1 {
             let num_blocks = n.div_ceil(BLOCK);
             let histogram = ctx.storage("radix histogram", u64::from(num_blocks) * 16 * 4);
@@ -63,7 +77,7 @@ impl RadixSort {
                 self.count.dispatch_1d(
                     ctx,
                     encoder,
-                    &[(0, &params), (1, keys), (2, &histogram)],
+                    &[(0, &params), (1, &bufs.keys), (2, &histogram)],
                     num_blocks,
                 );
                 prefix_sum.encode(ctx, encoder, &histogram, num_blocks * 16);
@@ -72,18 +86,17 @@ impl RadixSort {
                     encoder,
                     &[
                         (0, &params),
-                        (1, keys),
+                        (1, &bufs.keys),
                         (2, &histogram),
-                        (3, values),
-                        (4, keys_tmp),
-                        (5, values_tmp),
+                        (3, &bufs.values),
+                        (4, &bufs.keys_tmp),
+                        (5, &bufs.values_tmp),
                     ],
                     num_blocks,
                 );
-                std::mem::swap(&mut keys, &mut keys_tmp);
-                std::mem::swap(&mut values, &mut values_tmp);
+                std::mem::swap(&mut bufs.keys, &mut bufs.keys_tmp);
+                std::mem::swap(&mut bufs.values, &mut bufs.values_tmp);
             }
         }
-        Sorted { keys, values }
     }
 }

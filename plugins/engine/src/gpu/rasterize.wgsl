@@ -1,0 +1,110 @@
+// Front-to-back compositing: one 16×16 workgroup per (tile, image), one thread per pixel.
+// Each batch of up to 256 projected Gaussians is staged in shared memory by all threads;
+// the workgroup stops once every pixel's transmittance has run out.
+
+struct Params {
+    width: u32,
+    height: u32,
+    tiles_x: u32,
+    tiles_y: u32,
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> backgrounds: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read> ranges: array<vec2<u32>>;
+@group(0) @binding(3) var<storage, read> tile_values: array<u32>;
+@group(0) @binding(4) var<storage, read> projected: array<vec4<f32>>;
+@group(0) @binding(5) var<storage, read_write> out_rgba: array<vec4<f32>>;
+@group(0) @binding(6) var<storage, read_write> out_depth: array<f32>;
+@group(0) @binding(7) var<storage, read_write> out_t: array<f32>;
+@group(0) @binding(8) var<storage, read_write> out_last: array<u32>;
+
+const BATCH: u32 = 256u;
+const ALPHA_MAX: f32 = 0.99;
+const ALPHA_MIN: f32 = 1.0 / 255.0;
+const T_MIN: f32 = 1e-4;
+
+var<workgroup> batch_a: array<vec4<f32>, 256>;
+var<workgroup> batch_b: array<vec4<f32>, 256>;
+var<workgroup> batch_c: array<vec4<f32>, 256>;
+var<workgroup> done_count: atomic<u32>;
+var<workgroup> done_snapshot: u32;
+
+@compute @workgroup_size(16, 16, 1)
+fn rasterize(
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(local_invocation_id) lid: vec3<u32>,
+    @builtin(local_invocation_index) tid: u32,
+) {
+    let image = wid.z;
+    let tile = (image * params.tiles_y + wid.y) * params.tiles_x + wid.x;
+    let px = wid.x * 16u + lid.x;
+    let py = wid.y * 16u + lid.y;
+    let inside = px < params.width && py < params.height;
+    let centre = vec2<f32>(f32(px) + 0.5, f32(py) + 0.5);
+    let range = ranges[tile];
+
+    if (tid == 0u) {
+        atomicStore(&done_count, 0u);
+    }
+    workgroupBarrier();
+    var done = !inside;
+    if (done) {
+        atomicAdd(&done_count, 1u);
+    }
+    var t = 1.0;
+    var color = vec3<f32>(0.0);
+    var depth = 0.0;
+    var last = range.x;
+    let num_batches = (range.y - range.x + BATCH - 1u) / BATCH;
+    for (var b = 0u; b < num_batches; b++) {
+        // Everyone must be done reading the previous batch before it is overwritten.
+        workgroupBarrier();
+        if (tid == 0u) {
+            done_snapshot = atomicLoad(&done_count);
+        }
+        if (workgroupUniformLoad(&done_snapshot) == BATCH) {
+            break;
+        }
+        let start = range.x + b * BATCH;
+        if (start + tid < range.y) {
+            let g = tile_values[start + tid];
+            batch_a[tid] = projected[3u * g];
+            batch_b[tid] = projected[3u * g + 1u];
+            batch_c[tid] = projected[3u * g + 2u];
+        }
+        workgroupBarrier();
+        let n = min(BATCH, range.y - start);
+        for (var j = 0u; j < n && !done; j++) {
+            let a = batch_a[j];
+            let conic = batch_b[j].xyz;
+            let d = a.xy - centre;
+            let power = -0.5 * (conic.x * d.x * d.x + conic.z * d.y * d.y) - conic.y * d.x * d.y;
+            if (power > 0.0) {
+                continue;
+            }
+            let alpha = min(ALPHA_MAX, a.w * exp(power));
+            if (alpha < ALPHA_MIN) {
+                continue;
+            }
+            let next_t = t * (1.0 - alpha);
+            if (next_t < T_MIN) {
+                done = true;
+                atomicAdd(&done_count, 1u);
+                break;
+            }
+            let w = alpha * t;
+            color += batch_c[j].xyz * w;
+            depth += a.z * w;
+            t = next_t;
+            last = start + j + 1u;
+        }
+    }
+    if (inside) {
+        let pix = (image * params.height + py) * params.width + px;
+        out_rgba[pix] = vec4<f32>(color + t * backgrounds[image].xyz, 1.0 - t);
+        out_depth[pix] = depth;
+        out_t[pix] = t;
+        out_last[pix] = last;
+    }
+}

@@ -1,0 +1,75 @@
+// Tile binning. After the Gaussians are sorted by depth, `gather_counts` lays out their tile
+// counts in depth order (plus a trailing zero so the exclusive scan also yields the total),
+// `emit_keys` writes one (tile, Gaussian) pair per covered tile — in depth order, so a
+// stable sort on the tile alone leaves each tile's list front to back — and `tile_ranges`
+// finds where each tile's run starts and ends in the sorted pairs.
+
+struct Params {
+    num_gaussians: u32,
+    num_intersections: u32,
+    tiles_x: u32,
+    tiles_per_image: u32,
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> ids_sorted: array<u32>;
+@group(0) @binding(2) var<storage, read> counts: array<u32>;
+@group(0) @binding(3) var<storage, read_write> offsets: array<u32>;
+@group(0) @binding(4) var<storage, read> rects: array<vec4<u32>>;
+@group(0) @binding(5) var<storage, read_write> tile_keys: array<u32>;
+@group(0) @binding(6) var<storage, read_write> tile_values: array<u32>;
+@group(0) @binding(7) var<storage, read_write> ranges: array<vec2<u32>>;
+
+fn linear_id(gid: vec3<u32>, nwg: vec3<u32>) -> u32 {
+    return gid.x + gid.y * nwg.x * 256u;
+}
+
+@compute @workgroup_size(256)
+fn gather_counts(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let s = linear_id(gid, nwg);
+    if (s < params.num_gaussians) {
+        offsets[s] = counts[ids_sorted[s]];
+    } else if (s == params.num_gaussians) {
+        offsets[s] = 0u;
+    }
+}
+
+@compute @workgroup_size(256)
+fn emit_keys(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let s = linear_id(gid, nwg);
+    if (s >= params.num_gaussians) {
+        return;
+    }
+    let g = ids_sorted[s];
+    if (counts[g] == 0u) {
+        return;
+    }
+    let r = rects[g];
+    let lo = vec2<u32>(r.x & 0xffffu, r.x >> 16u);
+    let hi = vec2<u32>(r.y & 0xffffu, r.y >> 16u);
+    let base = r.z * params.tiles_per_image;
+    var out = offsets[s];
+    for (var y = lo.y; y < hi.y; y++) {
+        for (var x = lo.x; x < hi.x; x++) {
+            tile_keys[out] = base + y * params.tiles_x + x;
+            tile_values[out] = g;
+            out++;
+        }
+    }
+}
+
+@compute @workgroup_size(256)
+fn tile_ranges(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let i = linear_id(gid, nwg);
+    let n = params.num_intersections;
+    if (i >= n) {
+        return;
+    }
+    let tile = tile_keys[i];
+    if (i == 0u || tile_keys[i - 1u] != tile) {
+        ranges[tile].x = i;
+    }
+    if (i + 1u == n || tile_keys[i + 1u] != tile) {
+        ranges[tile].y = i + 1u;
+    }
+}
