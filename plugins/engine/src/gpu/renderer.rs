@@ -85,7 +85,14 @@ fn groups(n: u32) -> u32 {
 }
 
 impl Renderer {
+    /// Uses native float atomics for gradient accumulation when the device has them.
     pub fn new(ctx: &GpuContext) -> Self {
+        Self::with_float_atomics(ctx, ctx.float_atomics)
+    }
+
+    /// `native_atomics = false` forces the compare-exchange fallback (for testing it on
+    /// devices that have float atomics); `true` is ignored where the device lacks them.
+    pub fn with_float_atomics(ctx: &GpuContext, native_atomics: bool) -> Self {
         let common = include_str!("project_common.wgsl");
         let project = shader(
             ctx,
@@ -99,7 +106,7 @@ impl Renderer {
         );
         let tiles = shader(ctx, "tiles", include_str!("tiles.wgsl"));
         let raster = shader(ctx, "rasterize", include_str!("rasterize.wgsl"));
-        let atomics = if ctx.float_atomics {
+        let atomics = if native_atomics && ctx.float_atomics {
             include_str!("atomic_native.wgsl")
         } else {
             include_str!("atomic_cas.wgsl")

@@ -1,0 +1,128 @@
+//! GPU gradients against the analytic backward of the f64 reference (itself validated by
+//! finite differences in reference_fd.rs), for both gradient-accumulation paths.
+
+mod common;
+
+use cocog_engine::reference::{Gaussians64, render_backward};
+use cocog_engine::{Batch, Camera, GaussianParams, GpuContext, Renderer, View};
+use common::{gpu, random_scene, random_weights, test_camera};
+
+fn group_names(g: &GaussianParams) -> Vec<&'static str> {
+    let n = g.len();
+    let mut names = vec!["means"; 3 * n];
+    names.extend(vec!["log_scales"; 3 * n]);
+    names.extend(vec!["quats"; 4 * n]);
+    names.extend(vec!["opacity_logits"; n]);
+    names.extend(vec!["sh"; g.sh.len()]);
+    names
+}
+
+fn check(ctx: &GpuContext, renderer: &Renderer, views: &[View<'_>], seed: u64) {
+    let batch = Batch::from_views(ctx, views).unwrap();
+    let state = renderer.forward(ctx, &batch).unwrap();
+    let npix = (batch.width() * batch.height()) as usize;
+    let weights: Vec<_> = (0..views.len())
+        .map(|i| random_weights(npix, seed + i as u64))
+        .collect();
+    let v_rgba: Vec<[f32; 4]> = weights
+        .iter()
+        .flat_map(|(c, a, _)| {
+            c.iter()
+                .zip(a)
+                .map(|(c, &a)| [c[0] as f32, c[1] as f32, c[2] as f32, a as f32])
+        })
+        .collect();
+    let v_depth: Vec<f32> = weights
+        .iter()
+        .flat_map(|(_, _, d)| d.iter().map(|&d| d as f32))
+        .collect();
+    let v_rgba = ctx.storage_from("v_rgba", &v_rgba);
+    let v_depth = ctx.storage_from("v_depth", &v_depth);
+    let grads = renderer.backward(ctx, &batch, &state, &v_rgba, &v_depth);
+    for (i, view) in views.iter().enumerate() {
+        let spec = batch.images[i];
+        let gpu = grads
+            .read_grads(ctx, spec.first, spec.count)
+            .unwrap()
+            .scalars();
+        // The reference sees the f32 parameters widened, so both differentiate the same point.
+        let g64 = Gaussians64::from(view.gaussians);
+        let w = &weights[i];
+        let bg = view.background.map(f64::from);
+        let cpu = render_backward(&g64, view.camera, bg, &w.0, &w.1, &w.2).scalars();
+        let names = group_names(view.gaussians);
+        assert_eq!(gpu.len(), cpu.len());
+        for name in ["means", "log_scales", "quats", "opacity_logits", "sh"] {
+            let idx: Vec<usize> = (0..cpu.len()).filter(|&k| names[k] == name).collect();
+            let scale = idx.iter().map(|&k| cpu[k].abs()).fold(0.0, f64::max);
+            assert!(scale > 0.0, "image {i}: {name} gradients are all zero");
+            let mut worst = 0.0f64;
+            for &k in &idx {
+                // f32 atomics sum in arbitrary order: allow 0.5 % relative plus a floor tied
+                // to the group's largest gradient.
+                let err = (gpu[k] - cpu[k]).abs() / (5e-3 * cpu[k].abs() + 2e-4 * scale);
+                worst = worst.max(err);
+                assert!(
+                    err <= 1.0,
+                    "image {i} {name}[{k}]: GPU {} vs reference {}",
+                    gpu[k],
+                    cpu[k]
+                );
+            }
+            eprintln!("image {i} {name}: worst error {worst:.2} of tolerance (scale {scale:.2e})");
+        }
+    }
+}
+
+fn one_image(degree: u32, n: usize, seed: u64) -> (GaussianParams, Camera) {
+    let cam = test_camera(64, 48, 0.15);
+    (random_scene(n, degree, seed, &cam), cam)
+}
+
+#[test]
+fn backward_matches_reference_every_sh_degree() {
+    let Some(ctx) = gpu() else { return };
+    let renderer = Renderer::new(ctx);
+    for degree in 0..=3 {
+        let (g, cam) = one_image(degree, 60, 40 + u64::from(degree));
+        let view = View {
+            gaussians: &g,
+            camera: &cam,
+            background: [0.3, 0.2, 0.7],
+        };
+        check(ctx, &renderer, &[view], 90);
+    }
+}
+
+#[test]
+fn backward_compare_exchange_fallback_matches_reference() {
+    let Some(ctx) = gpu() else { return };
+    let renderer = Renderer::with_float_atomics(ctx, false);
+    let (g, cam) = one_image(3, 50, 3);
+    let view = View {
+        gaussians: &g,
+        camera: &cam,
+        background: [0.0, 0.5, 1.0],
+    };
+    check(ctx, &renderer, &[view], 17);
+}
+
+#[test]
+fn batched_backward_keeps_images_apart() {
+    let Some(ctx) = gpu() else { return };
+    let renderer = Renderer::new(ctx);
+    let cams: Vec<Camera> = (0..3)
+        .map(|i| test_camera(40, 33, -0.1 * f64::from(i)))
+        .collect();
+    let sets: Vec<GaussianParams> = (0..3)
+        .map(|i| random_scene(50, 1, 60 + i as u64, &cams[i]))
+        .collect();
+    let views: Vec<View<'_>> = (0..3)
+        .map(|i| View {
+            gaussians: &sets[i],
+            camera: &cams[i],
+            background: [0.5, 0.1 * i as f32, 0.2],
+        })
+        .collect();
+    check(ctx, &renderer, &views, 5);
+}
