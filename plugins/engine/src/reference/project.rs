@@ -179,11 +179,12 @@ fn forward(g: &Gaussians64, i: usize, cam: &Camera) -> Option<Fwd> {
         tile_min,
         tile_max,
     };
+    // Checked before the colour clamp: max(-inf, 0) would hide a non-finite SH coefficient.
     let finite = out
         .mean2d
         .iter()
         .chain(&out.conic)
-        .chain(&out.color)
+        .chain(&color_pre)
         .all(|v| v.is_finite())
         && opacity.is_finite();
     finite.then_some(Fwd {
