@@ -7,7 +7,11 @@ pub mod colmap;
 pub mod error;
 pub mod llff;
 pub mod nerf;
+pub mod ply;
 pub mod pose;
+pub mod splats;
 
 pub use atomic::write_atomic;
 pub use error::{FormatError, Result};
+pub use ply::PointCloud;
+pub use splats::Splats;

@@ -1,0 +1,97 @@
+//! Gaussian splats in INRIA 3DGS parameterisation, structure-of-arrays of f32 for GPU upload.
+
+/// Coefficients per colour channel beyond DC for SH degree `d`: (d+1)² − 1.
+pub const fn sh_rest_per_channel(degree: u32) -> usize {
+    ((degree + 1) * (degree + 1) - 1) as usize
+}
+
+/// Gaussians as the INRIA PLY stores them (pre-activation values).
+///
+/// Every vector is flat: splat `i` owns `means[3i..3i+3]`, `rotations[4i..4i+4]` and so on.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Splats {
+    /// World positions.
+    pub means: Vec<f32>,
+    /// Natural log of the standard deviation along each local axis.
+    pub log_scales: Vec<f32>,
+    /// Quaternions w, x, y, z; not necessarily normalised (INRIA saves the raw parameter).
+    pub rotations: Vec<f32>,
+    /// Opacity logits: α = sigmoid(v).
+    pub opacities: Vec<f32>,
+    /// DC SH coefficients R, G, B.
+    pub sh_dc: Vec<f32>,
+    /// Higher SH coefficients, per splat channel-major: `sh_rest[i*3K + c*K + j]`, K = `sh_rest_per_channel(sh_degree)`.
+    pub sh_rest: Vec<f32>,
+    /// 0 to 3.
+    pub sh_degree: u32,
+}
+
+impl Splats {
+    /// An empty set with room for `n` splats.
+    pub fn with_capacity(n: usize, sh_degree: u32) -> Self {
+        let k = sh_rest_per_channel(sh_degree);
+        Splats {
+            means: Vec::with_capacity(3 * n),
+            log_scales: Vec::with_capacity(3 * n),
+            rotations: Vec::with_capacity(4 * n),
+            opacities: Vec::with_capacity(n),
+            sh_dc: Vec::with_capacity(3 * n),
+            sh_rest: Vec::with_capacity(3 * k * n),
+            sh_degree,
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.opacities.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.opacities.is_empty()
+    }
+
+    /// SH coefficients per channel beyond DC.
+    pub fn rest_per_channel(&self) -> usize {
+        sh_rest_per_channel(self.sh_degree)
+    }
+
+    /// Checks that every vector has the length `len()` implies, or says which one does not.
+    pub fn check(&self) -> Result<(), String> {
+        if self.sh_degree > 3 {
+            return Err(format!("sh_degree {} is above 3", self.sh_degree));
+        }
+        let n = self.len();
+        let k = self.rest_per_channel();
+        for (name, len, per) in [
+            ("means", self.means.len(), 3),
+            ("log_scales", self.log_scales.len(), 3),
+            ("rotations", self.rotations.len(), 4),
+            ("sh_dc", self.sh_dc.len(), 3),
+            ("sh_rest", self.sh_rest.len(), 3 * k),
+        ] {
+            if len != n * per {
+                return Err(format!(
+                    "{name} has {len} values, expected {} for {n} splats",
+                    n * per
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The SH DC constant Y₀₀ = 1 / (2√π).
+pub const SH_C0: f32 = 0.282_094_8;
+
+/// DC coefficient of a colour in [0, 1]: inverse of `0.5 + C0 · dc`.
+pub fn rgb_to_sh_dc(rgb: f32) -> f32 {
+    (rgb - 0.5) / SH_C0
+}
+
+/// Logit, the inverse of the sigmoid that maps opacity parameters to α.
+pub fn logit(alpha: f32) -> f32 {
+    (alpha / (1.0 - alpha)).ln()
+}
+
+pub fn sigmoid(v: f32) -> f32 {
+    1.0 / (1.0 + (-v).exp())
+}

@@ -1,0 +1,348 @@
+//! 3DGS and point-cloud PLY: round trips, plyfile cross-checks both ways, bad input, and speed.
+
+mod common;
+
+use std::path::Path;
+
+use cocog_formats::PointCloud;
+use cocog_formats::ply::{read_points, read_splats, write_points, write_splats};
+use cocog_formats::splats::{Splats, sh_rest_per_channel};
+
+/// Deterministic pseudo-random floats (xorshift), so failures reproduce.
+fn noise(seed: u64) -> impl FnMut() -> f32 {
+    let mut s = seed.max(1);
+    move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 40) as f32 / (1u64 << 24) as f32 * 4.0 - 2.0
+    }
+}
+
+fn random_splats(n: usize, degree: u32, seed: u64) -> Splats {
+    let mut r = noise(seed);
+    let mut v = |k: usize| (0..k).map(|_| r()).collect::<Vec<f32>>();
+    Splats {
+        means: v(3 * n),
+        log_scales: v(3 * n),
+        rotations: v(4 * n),
+        opacities: v(n),
+        sh_dc: v(3 * n),
+        sh_rest: v(3 * sh_rest_per_channel(degree) * n),
+        sh_degree: degree,
+    }
+}
+
+/// The INRIA property order of splat `i`, for comparing against what Python sees.
+fn inria_row(s: &Splats, i: usize) -> Vec<f32> {
+    let k3 = 3 * s.rest_per_channel();
+    let mut row = s.means[3 * i..3 * i + 3].to_vec();
+    row.extend([0.0; 3]);
+    row.extend(&s.sh_dc[3 * i..3 * i + 3]);
+    row.extend(&s.sh_rest[k3 * i..k3 * (i + 1)]);
+    row.push(s.opacities[i]);
+    row.extend(&s.log_scales[3 * i..3 * i + 3]);
+    row.extend(&s.rotations[4 * i..4 * i + 4]);
+    row
+}
+
+#[test]
+fn splats_round_trip_every_degree() {
+    let dir = tempfile::tempdir().unwrap();
+    for degree in 0..=3 {
+        let s = random_splats(1000, degree, 7 + u64::from(degree));
+        let p = dir.path().join(format!("d{degree}.ply"));
+        write_splats(&p, &s, Some("-y")).unwrap();
+        let back = read_splats(&p).unwrap();
+        assert_eq!(back, s);
+        let text = std::fs::read(&p).unwrap();
+        let header_end = text.windows(11).position(|w| w == b"end_header\n").unwrap() + 11;
+        assert_eq!(
+            text.len() - header_end,
+            1000 * 4 * (17 + 3 * sh_rest_per_channel(degree))
+        );
+    }
+}
+
+const PLYFILE_READS: &str = r#"
+import sys, numpy as np
+from plyfile import PlyData
+d = PlyData.read(sys.argv[1])
+assert not d.text and d.byte_order == '<', (d.text, d.byte_order)
+assert [e.name for e in d.elements] == ['vertex']
+v = d['vertex']
+names = [p.name for p in v.properties]
+assert all(v.data.dtype[n] == np.dtype('<f4') for n in names)
+np.stack([v[n] for n in names], 1).astype('<f4').tofile(sys.argv[2])
+print(' '.join(names))
+print('|'.join(d.comments))
+"#;
+
+#[test]
+fn plyfile_reads_our_splats() {
+    if !common::python_has(&["plyfile", "numpy"]) {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    for degree in [0, 1, 3] {
+        let s = random_splats(257, degree, 99);
+        let p = dir.path().join("s.ply");
+        let raw = dir.path().join("s.f32");
+        write_splats(&p, &s, Some("y")).unwrap();
+        let out = common::run_python(PLYFILE_READS, &[p.to_str().unwrap(), raw.to_str().unwrap()]);
+        let mut lines = out.lines();
+        let names: Vec<&str> = lines.next().unwrap().split(' ').collect();
+        let k3 = 3 * sh_rest_per_channel(degree);
+        let mut expect = vec![
+            "x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2",
+        ]
+        .into_iter()
+        .map(String::from)
+        .collect::<Vec<_>>();
+        expect.extend((0..k3).map(|i| format!("f_rest_{i}")));
+        expect.extend(
+            [
+                "opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3",
+            ]
+            .map(String::from),
+        );
+        assert_eq!(names, expect);
+        let comments = lines.next().unwrap();
+        assert!(
+            comments.contains(&format!("SH degree: {degree}"))
+                && comments.contains("Vertical axis: y"),
+            "{comments}"
+        );
+        let bytes = std::fs::read(&raw).unwrap();
+        let vals: Vec<f32> = bytes
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+            .collect();
+        let expected: Vec<f32> = (0..s.len()).flat_map(|i| inria_row(&s, i)).collect();
+        assert_eq!(vals, expected);
+    }
+}
+
+/// plyfile writes INRIA-style files in other encodings and types, with extra elements/properties.
+const PLYFILE_WRITES: &str = r#"
+import sys, numpy as np
+from plyfile import PlyData, PlyElement
+n, out = 50, sys.argv[1]
+rng = np.random.default_rng(5)
+names = ['x','y','z','nx','ny','nz','f_dc_0','f_dc_1','f_dc_2'] + [f'f_rest_{i}' for i in range(9)] + ['opacity','scale_0','scale_1','scale_2','rot_0','rot_1','rot_2','rot_3','extra']
+vals = rng.standard_normal((n, len(names))).astype('<f4')
+vals.tofile(out + '/values.f32')
+for kind, dt, text, order in [('le_f', 'f4', False, '<'), ('be_d', 'f8', False, '>'), ('ascii', 'f4', True, '=')]:
+    # Shuffle property order to prove lookup is by name.
+    perm = list(range(len(names)))[::-1]
+    arr = np.empty(n, dtype=[(names[i], order + dt) for i in perm])
+    for i in perm:
+        arr[names[i]] = vals[:, i]
+    faces = PlyElement.describe(np.array([(np.array([0, 1, 2], 'i4'),)], dtype=[('vertex_indices', 'O')]), 'face')
+    PlyData([faces, PlyElement.describe(arr, 'vertex')], text=text, byte_order=order if order != '=' else '<').write(f'{out}/{kind}.ply')
+"#;
+
+#[test]
+fn we_read_plyfile_files_in_any_encoding_and_order() {
+    if !common::python_has(&["plyfile", "numpy"]) {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    common::run_python(PLYFILE_WRITES, &[dir.path().to_str().unwrap()]);
+    let bytes = std::fs::read(dir.path().join("values.f32")).unwrap();
+    let vals: Vec<f32> = bytes
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+        .collect();
+    let cols = 27;
+    for kind in ["le_f", "be_d", "ascii"] {
+        let s = read_splats(&dir.path().join(format!("{kind}.ply")))
+            .unwrap_or_else(|e| panic!("{kind}: {e}"));
+        assert_eq!((s.len(), s.sh_degree), (50, 1), "{kind}");
+        for i in 0..50 {
+            let expect = &vals[i * cols..i * cols + cols - 1];
+            let got = inria_row(&s, i);
+            // Normals are not kept; ascii goes through decimal text, so allow float rounding there.
+            for (j, (a, b)) in got
+                .iter()
+                .zip(expect)
+                .enumerate()
+                .filter(|(j, _)| !(3..6).contains(j))
+            {
+                assert!(
+                    (a - b).abs() <= 1e-6 * b.abs().max(1.0),
+                    "{kind} row {i} col {j}: {a} vs {b}"
+                );
+            }
+        }
+    }
+}
+
+fn write_raw(dir: &Path, name: &str, bytes: &[u8]) -> std::path::PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, bytes).unwrap();
+    p
+}
+
+#[test]
+fn bad_plys_are_refused_clearly() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let list = write_raw(d, "list.ply", b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty list uchar int idx\nend_header\n1 2 3 4\n");
+    let e = read_splats(&list).unwrap_err().to_string();
+    assert!(
+        e.contains("list.ply") && e.contains("\"idx\"") && e.contains("list property"),
+        "{e}"
+    );
+    let fmt = write_raw(
+        d,
+        "fmt.ply",
+        b"ply\nformat binary_middle_endian 1.0\nelement vertex 0\nend_header\n",
+    );
+    let e = read_splats(&fmt).unwrap_err().to_string();
+    assert!(
+        e.contains("fmt.ply") && e.contains("header") && e.contains("binary_middle_endian"),
+        "{e}"
+    );
+    let typ = write_raw(
+        d,
+        "typ.ply",
+        b"ply\nformat ascii 1.0\nelement vertex 0\nproperty float128 x\nend_header\n",
+    );
+    let e = read_splats(&typ).unwrap_err().to_string();
+    assert!(e.contains("float128"), "{e}");
+    let nop = write_raw(d, "nop.ply", b"not a ply\n");
+    assert!(
+        read_splats(&nop)
+            .unwrap_err()
+            .to_string()
+            .contains("header")
+    );
+
+    let s = random_splats(10, 1, 3);
+    let good = d.join("good.ply");
+    write_splats(&good, &s, None).unwrap();
+    let bytes = std::fs::read(&good).unwrap();
+    let cut = write_raw(d, "cut.ply", &bytes[..bytes.len() - 7]);
+    let e = read_splats(&cut).unwrap_err().to_string();
+    assert!(e.contains("cut.ply") && e.contains("vertex data"), "{e}");
+    let text = String::from_utf8_lossy(&bytes).replace("property float f_rest_8\n", "");
+    let header_only = &text[..text.find("end_header\n").unwrap() + 11];
+    let odd = write_raw(
+        d,
+        "odd.ply",
+        header_only
+            .replace("element vertex 10", "element vertex 0")
+            .as_bytes(),
+    );
+    let e = read_splats(&odd).unwrap_err().to_string();
+    assert!(e.contains("f_rest") && e.contains("got 8"), "{e}");
+    let huge = write_raw(
+        d,
+        "huge.ply",
+        &[
+            header_only
+                .replace("element vertex 10", "element vertex 99999999999")
+                .as_bytes(),
+            &[0u8; 64],
+        ]
+        .concat(),
+    );
+    let e = read_splats(&huge).unwrap_err().to_string();
+    assert!(e.contains("cannot fit"), "{e}");
+    let missing = write_raw(
+        d,
+        "missing.ply",
+        b"ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nend_header\n",
+    );
+    let e = read_splats(&missing).unwrap_err().to_string();
+    assert!(
+        e.contains("missing 3DGS properties") && e.contains("opacity"),
+        "{e}"
+    );
+    let compressed = write_raw(d, "c.ply", b"ply\nformat binary_little_endian 1.0\nelement chunk 0\nproperty float min_x\nelement vertex 0\nproperty uint packed_position\nend_header\n");
+    assert!(
+        read_splats(&compressed)
+            .unwrap_err()
+            .to_string()
+            .contains("compressed")
+    );
+    let mut bad = s;
+    bad.opacities.pop();
+    let e = write_splats(&d.join("never.ply"), &bad, None)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("opacities") || e.contains("means"), "{e}");
+    assert!(!d.join("never.ply").exists());
+}
+
+#[test]
+fn point_clouds_round_trip_and_plyfile_agrees() {
+    let cloud = PointCloud {
+        positions: (0..300).map(|i| i as f32 * 0.25 - 7.0).collect(),
+        colors: (0..300).map(|i| (i * 7 % 256) as u8).collect(),
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("points.ply");
+    write_points(&p, &cloud).unwrap();
+    assert_eq!(read_points(&p).unwrap(), cloud);
+    if !common::python_has(&["plyfile", "numpy"]) {
+        return;
+    }
+    let script = r#"
+import sys, numpy as np
+from plyfile import PlyData, PlyElement
+v = PlyData.read(sys.argv[1])['vertex']
+print(','.join(str(x) for x in np.stack([v['x'], v['y'], v['z']], 1).ravel()[:6]))
+print(','.join(str(int(x)) for x in np.stack([v['red'], v['green'], v['blue']], 1).ravel()))
+# A float-coloured cloud without normals, as some tools write.
+arr = np.array([(1.0, 2.0, 3.0, 1.0, 0.5, 0.0)], dtype=[(n, 'f8') for n in ['x','y','z','red','green','blue']])
+PlyData([PlyElement.describe(arr, 'vertex')]).write(sys.argv[2])
+"#;
+    let q = dir.path().join("float.ply");
+    let out = common::run_python(script, &[p.to_str().unwrap(), q.to_str().unwrap()]);
+    let mut lines = out.lines();
+    let xyz: Vec<f32> = lines
+        .next()
+        .unwrap()
+        .split(',')
+        .map(|v| v.parse().unwrap())
+        .collect();
+    assert_eq!(xyz, cloud.positions[..6]);
+    let rgb: Vec<u8> = lines
+        .next()
+        .unwrap()
+        .split(',')
+        .map(|v| v.parse().unwrap())
+        .collect();
+    assert_eq!(rgb, cloud.colors);
+    let f = read_points(&q).unwrap();
+    assert_eq!(
+        (f.positions, f.colors),
+        (vec![1.0, 2.0, 3.0], vec![255, 128, 0])
+    );
+}
+
+/// Throughput of 1M degree-3 splats; run with `--ignored --nocapture` and report the numbers.
+#[test]
+#[ignore]
+fn speed_one_million_splats() {
+    let s = random_splats(1_000_000, 3, 1);
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("big.ply");
+    let t = std::time::Instant::now();
+    write_splats(&p, &s, None).unwrap();
+    let w = t.elapsed();
+    let t = std::time::Instant::now();
+    let back = read_splats(&p).unwrap();
+    let r = t.elapsed();
+    let mb = std::fs::metadata(&p).unwrap().len() as f64 / 1e6;
+    assert_eq!(back.len(), s.len());
+    eprintln!(
+        "1M splats D3 ({mb:.0} MB): write {:.2} s ({:.0} MB/s), read {:.2} s ({:.0} MB/s)",
+        w.as_secs_f64(),
+        mb / w.as_secs_f64(),
+        r.as_secs_f64(),
+        mb / r.as_secs_f64()
+    );
+}
