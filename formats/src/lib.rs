@@ -5,6 +5,7 @@ mod atomic;
 mod bytes;
 pub mod colmap;
 pub mod error;
+pub mod exr_map;
 pub mod llff;
 pub mod nerf;
 pub mod ply;
