@@ -6,6 +6,7 @@ mod bytes;
 pub mod colmap;
 pub mod error;
 pub mod exr_map;
+pub mod glb;
 pub mod llff;
 pub mod nerf;
 pub mod ply;

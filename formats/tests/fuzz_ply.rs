@@ -23,7 +23,7 @@ fn header_line() -> impl Strategy<Value = String> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(256))]
+    #![proptest_config(ProptestConfig { cases: 256, failure_persistence: None, ..ProptestConfig::default() })]
 
     #[test]
     fn ply_reader_never_panics(lines in prop::collection::vec(header_line(), 0..12), body in prop::collection::vec(any::<u8>(), 0..256)) {
