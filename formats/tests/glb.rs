@@ -163,7 +163,7 @@ v.validateBytes(bytes).then(r => console.log(JSON.stringify(r.issues))).catch(e 
         String::from_utf8_lossy(&out.stderr)
     );
     let issues: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    eprintln!("gltf-validator issues: {}", issues);
+    eprintln!("gltf-validator issues: {issues}");
     let messages = issues["messages"].as_array().unwrap();
     // The validator predates extension-prefixed attribute semantics (glTF-Validator #252), so it
     // reports those as invalid semantics; anything else at error level is ours to fix.
