@@ -7,6 +7,7 @@ pub mod colmap;
 pub mod error;
 pub mod exr_map;
 pub mod glb;
+pub mod images;
 pub mod llff;
 pub mod nerf;
 pub mod ply;
