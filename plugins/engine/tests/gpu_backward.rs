@@ -95,9 +95,9 @@ fn backward_matches_reference_every_sh_degree() {
 }
 
 #[test]
-fn backward_compare_exchange_fallback_matches_reference() {
+fn backward_without_subgroups_or_float_atomics_matches_reference() {
     let Some(ctx) = gpu() else { return };
-    let renderer = Renderer::with_float_atomics(ctx, false);
+    let renderer = Renderer::with_options(ctx, false, false);
     let (g, cam) = one_image(3, 50, 3);
     let view = View {
         gaussians: &g,
@@ -105,6 +105,19 @@ fn backward_compare_exchange_fallback_matches_reference() {
         background: [0.0, 0.5, 1.0],
     };
     check(ctx, &renderer, &[view], 17);
+}
+
+#[test]
+fn backward_compare_exchange_with_subgroups_matches_reference() {
+    let Some(ctx) = gpu() else { return };
+    let renderer = Renderer::with_options(ctx, false, true);
+    let (g, cam) = one_image(2, 50, 4);
+    let view = View {
+        gaussians: &g,
+        camera: &cam,
+        background: [0.0, 0.5, 1.0],
+    };
+    check(ctx, &renderer, &[view], 18);
 }
 
 #[test]

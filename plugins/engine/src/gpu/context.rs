@@ -17,6 +17,8 @@ pub struct GpuContext {
     pub adapter_info: wgpu::AdapterInfo,
     /// Native `atomic<f32>` adds; without them gradients use a compare-exchange loop.
     pub float_atomics: bool,
+    /// Subgroup reductions, which cut the backward's atomics by the subgroup width.
+    pub subgroups: bool,
     pub memory: Arc<MemoryTracker>,
 }
 
@@ -25,6 +27,7 @@ impl std::fmt::Debug for GpuContext {
         f.debug_struct("GpuContext")
             .field("adapter", &self.adapter_name())
             .field("float_atomics", &self.float_atomics)
+            .field("subgroups", &self.subgroups)
             .finish()
     }
 }
@@ -108,9 +111,14 @@ impl GpuContext {
             .features()
             .contains(wgpu::Features::SHADER_FLOAT32_ATOMIC)
             && std::env::var("COCOG_NO_FLOAT_ATOMICS").is_err();
+        let subgroups = adapter.features().contains(wgpu::Features::SUBGROUP)
+            && std::env::var("COCOG_NO_SUBGROUPS").is_err();
         let mut required_features = wgpu::Features::empty();
         if float_atomics {
             required_features |= wgpu::Features::SHADER_FLOAT32_ATOMIC;
+        }
+        if subgroups {
+            required_features |= wgpu::Features::SUBGROUP;
         }
         // Ask for what the adapter has on buffer sizes: big scenes need big buffers, and
         // asking costs nothing on adapters that have less.
@@ -133,8 +141,18 @@ impl GpuContext {
             queue,
             adapter_info: info,
             float_atomics,
+            subgroups,
             memory: Arc::default(),
         })
+    }
+
+    /// Blocks until all submitted GPU work has finished (for timing; the engine itself only
+    /// syncs when reading back).
+    pub fn wait(&self) -> Result<(), EngineError> {
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map(|_| ())
+            .map_err(|e| EngineError::Readback(e.to_string()))
     }
 
     /// "name (backend, device type)", for logs and benchmark reports.

@@ -2,8 +2,10 @@
 // to front from the last Gaussian any of its pixels used, recovering each transmittance by
 // division, and accumulates per-Gaussian screen-space gradients with atomics.
 // v_proj layout per Gaussian: mean2d (2), conic (3), colour (3), opacity, depth.
-// `add_grad` and the `v_proj` binding (slot 9) are prepended by the host: native float
-// atomics where the adapter has them, a compare-exchange loop otherwise.
+// The host appends `add_grad` and the `v_proj` binding (slot 9) — native float atomics where
+// the adapter has them, a compare-exchange loop otherwise — and `flush`, which either adds
+// each pixel's gradient directly or first sums it over the subgroup (one atomic per
+// subgroup instead of one per pixel).
 
 struct Params {
     width: u32,
@@ -34,12 +36,14 @@ var<workgroup> batch_id: array<u32, 256>;
 var<workgroup> tile_end: atomic<u32>;
 var<workgroup> tile_end_snapshot: u32;
 
-@compute @workgroup_size(16, 16, 1)
+// One-dimensional workgroup: subgroup builtins are only defined for those.
+@compute @workgroup_size(256)
 fn rasterize_backward(
     @builtin(workgroup_id) wid: vec3<u32>,
-    @builtin(local_invocation_id) lid: vec3<u32>,
     @builtin(local_invocation_index) tid: u32,
+    // SUBGROUP_PARAM
 ) {
+    let lid = vec2<u32>(tid % 16u, tid / 16u);
     let image = wid.z;
     let tile = (image * params.tiles_y + wid.y) * params.tiles_x + wid.x;
     let px = wid.x * 16u + lid.x;
@@ -88,46 +92,46 @@ fn rasterize_backward(
         workgroupBarrier();
         for (var j = batch_end - batch_start; j > 0u; j--) {
             let k = j - 1u;
-            if (batch_start + k >= last) {
-                continue;
-            }
+            // Every thread walks the same Gaussians in lockstep (the bounds are uniform), so
+            // `flush` may reduce across the subgroup; non-contributing pixels add zeros.
+            // v_proj slots 0-3, 4-7 and 8-9 (see the layout above).
+            var g0 = vec4<f32>(0.0);
+            var g1 = vec4<f32>(0.0);
+            var g2 = vec2<f32>(0.0);
+            var contributes = false;
             let a = batch_a[k];
             let conic = batch_b[k].xyz;
             let d = a.xy - centre;
             let power = -0.5 * (conic.x * d.x * d.x + conic.z * d.y * d.y) - conic.y * d.x * d.y;
-            if (power > 0.0) {
-                continue;
-            }
-            let gauss = exp(power);
+            let gauss = exp(min(power, 0.0));
             let raw = a.w * gauss;
             let alpha = min(ALPHA_MAX, raw);
-            if (alpha < ALPHA_MIN) {
-                continue;
+            if (batch_start + k < last && power <= 0.0 && alpha >= ALPHA_MIN) {
+                contributes = true;
+                let one_minus = 1.0 - alpha;
+                t = t / one_minus;
+                let w = alpha * t;
+                let c = batch_c[k].xyz;
+                var v_alpha = v_out.w * t_final / one_minus;
+                v_alpha += dot(v_out.xyz, t * c - behind / one_minus);
+                v_alpha += v_d * (t * a.z - behind_depth / one_minus);
+                behind += c * w;
+                behind_depth += a.z * w;
+                g1 = vec4<f32>(0.0, w * v_out.xyz);
+                g2.y = w * v_d;
+                if (raw <= ALPHA_MAX) {
+                    let v_power = v_alpha * alpha;
+                    g0 = -v_power * vec4<f32>(
+                        conic.x * d.x + conic.y * d.y,
+                        conic.z * d.y + conic.y * d.x,
+                        0.5 * d.x * d.x,
+                        d.x * d.y,
+                    );
+                    g1.x = -v_power * 0.5 * d.y * d.y;
+                    g2.x = v_alpha * gauss;
+                }
             }
-            let one_minus = 1.0 - alpha;
-            t = t / one_minus;
-            let w = alpha * t;
-            let c = batch_c[k].xyz;
-            var v_alpha = v_out.w * t_final / one_minus;
-            v_alpha += dot(v_out.xyz, t * c - behind / one_minus);
-            v_alpha += v_d * (t * a.z - behind_depth / one_minus);
-            behind += c * w;
-            behind_depth += a.z * w;
-
-            let base = batch_id[k] * V_STRIDE;
-            add_grad(base + 5u, w * v_out.x);
-            add_grad(base + 6u, w * v_out.y);
-            add_grad(base + 7u, w * v_out.z);
-            add_grad(base + 9u, w * v_d);
-            if (raw <= ALPHA_MAX) {
-                let v_power = v_alpha * alpha;
-                add_grad(base + 0u, -v_power * (conic.x * d.x + conic.y * d.y));
-                add_grad(base + 1u, -v_power * (conic.z * d.y + conic.y * d.x));
-                add_grad(base + 2u, -v_power * 0.5 * d.x * d.x);
-                add_grad(base + 3u, -v_power * d.x * d.y);
-                add_grad(base + 4u, -v_power * 0.5 * d.y * d.y);
-                add_grad(base + 8u, v_alpha * gauss);
-            }
+            flush(batch_id[k] * V_STRIDE, contributes, g0, g1, g2, sg_lane);
         }
     }
 }

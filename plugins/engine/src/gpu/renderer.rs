@@ -85,14 +85,15 @@ fn groups(n: u32) -> u32 {
 }
 
 impl Renderer {
-    /// Uses native float atomics for gradient accumulation when the device has them.
+    /// Uses the fastest gradient accumulation the device supports.
     pub fn new(ctx: &GpuContext) -> Self {
-        Self::with_float_atomics(ctx, ctx.float_atomics)
+        Self::with_options(ctx, true, true)
     }
 
-    /// `native_atomics = false` forces the compare-exchange fallback (for testing it on
-    /// devices that have float atomics); `true` is ignored where the device lacks them.
-    pub fn with_float_atomics(ctx: &GpuContext, native_atomics: bool) -> Self {
+    /// Picks the gradient-accumulation variant: `native_atomics = false` forces the
+    /// compare-exchange fallback and `subgroups = false` per-pixel atomics (to test those
+    /// paths on devices that have more); `true` is ignored where the device lacks the feature.
+    pub fn with_options(ctx: &GpuContext, native_atomics: bool, subgroups: bool) -> Self {
         let common = include_str!("project_common.wgsl");
         let project = shader(
             ctx,
@@ -111,10 +112,20 @@ impl Renderer {
         } else {
             include_str!("atomic_cas.wgsl")
         };
+        let mut raster_bwd_src = include_str!("rasterize_backward.wgsl").to_owned();
+        let flush = if subgroups && ctx.subgroups {
+            raster_bwd_src = raster_bwd_src.replace(
+                "// SUBGROUP_PARAM",
+                "@builtin(subgroup_invocation_id) sg_lane: u32,",
+            );
+            include_str!("flush_subgroup.wgsl")
+        } else {
+            include_str!("flush_direct.wgsl")
+        };
         let raster_bwd = shader(
             ctx,
             "rasterize_backward",
-            &format!("{}\n{atomics}", include_str!("rasterize_backward.wgsl")),
+            &format!("{raster_bwd_src}\n{atomics}\n{flush}"),
         );
         Self {
             scan: PrefixSum::new(ctx),

@@ -4,6 +4,7 @@
 // Index loops mirror the matrix formulas they implement; iterator chains would hide them.
 #![allow(clippy::needless_range_loop)]
 
+pub mod loss;
 mod project;
 mod raster;
 pub mod sh;
