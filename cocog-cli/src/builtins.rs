@@ -12,7 +12,10 @@ pub const PLANNED: &[(&str, &str)] = &[
     ("prune", "the format toolkit (issue #3)"),
     ("export", "the format toolkit (issue #3)"),
     ("convert", "the format toolkit (issue #3)"),
-    ("eval", "the metrics crate (issue #4)"),
+    (
+        "eval-scene",
+        "the GPU engine (issue #5): it renders the scene first",
+    ),
     ("train", "the GPU engine (issue #5)"),
     ("render", "the GPU engine (issue #5)"),
 ];
@@ -23,5 +26,5 @@ pub fn planned(name: &str) -> Option<&'static str> {
 }
 
 pub fn register(registry: &mut Registry) {
-    let _ = registry;
+    registry.add_builtins(cocog_eval::stages());
 }

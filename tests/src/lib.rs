@@ -93,3 +93,63 @@ pub fn shared_dir() -> Option<PathBuf> {
     let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared");
     p.is_dir().then(|| p.canonicalize().unwrap_or(p))
 }
+
+/// A small scene written by hand: `n` cameras on a circle of `radius` around `centre`
+/// looking inward, plus a point cloud, so stages have something real to transform.
+pub fn write_tiny_scene(dir: &Path, n: usize, centre: [f64; 3], radius: f64) {
+    use serde_json::json;
+    std::fs::create_dir_all(dir).expect("mkdir scene");
+    let views: Vec<_> = (0..n)
+        .map(|i| {
+            let a = i as f64 / n as f64 * std::f64::consts::TAU;
+            let (s, c) = a.sin_cos();
+            // Camera z (forward) points at the centre; y is world -z (down); x = y × z.
+            let z = [-c, -s, 0.0];
+            let y = [0.0, 0.0, -1.0];
+            let x = [
+                y[1] * z[2] - y[2] * z[1],
+                y[2] * z[0] - y[0] * z[2],
+                y[0] * z[1] - y[1] * z[0],
+            ];
+            let t = [centre[0] + radius * c, centre[1] + radius * s, centre[2]];
+            json!({
+                "name": format!("{i:03}"),
+                "image": format!("/nonexistent/images/{i:03}.png"),
+                "camera": 1,
+                "world_from_camera": [
+                    [x[0], y[0], z[0], t[0]],
+                    [x[1], y[1], z[1], t[1]],
+                    [x[2], y[2], z[2], t[2]],
+                    [0.0, 0.0, 0.0, 1.0]
+                ],
+                "split": if i % 8 == 0 { "test" } else { "train" },
+                "lens": { "focus_distance": radius, "aperture": 10.0 },
+            })
+        })
+        .collect();
+    let scene = json!({
+        "format": "cocog.scene",
+        "version": "1.0",
+        "cameras": [{ "id": 1, "width": 40, "height": 30, "fx": 40.0, "fy": 40.0, "cx": 20.0, "cy": 15.0 }],
+        "views": views,
+        "bounds": { "near": 0.5 * radius, "far": 2.0 * radius },
+        "points": "points.ply",
+    });
+    std::fs::write(dir.join("scene.json"), scene.to_string()).expect("write scene.json");
+    let cloud = cocog_formats::PointCloud {
+        positions: vec![
+            centre[0] as f32,
+            centre[1] as f32,
+            centre[2] as f32,
+            (centre[0] + 1.0) as f32,
+            centre[1] as f32,
+            (centre[2] - 0.5) as f32,
+        ],
+        colors: vec![255, 0, 0, 0, 255, 0],
+    };
+    cocog_formats::ply::write_points(&dir.join("points.ply"), &cloud).expect("write points.ply");
+}
+
+pub fn path_str(p: &Path) -> &str {
+    p.to_str().expect("test paths are UTF-8")
+}

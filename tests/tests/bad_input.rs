@@ -1,0 +1,126 @@
+//! Bad input gets a one-line error naming the path and cause, and leaves nothing behind.
+
+use std::path::Path;
+
+use cocog_tests::{cdylib, cocog, listing, path_str, stderr, write_tiny_scene};
+
+fn recenter(input: &Path, output: &Path, extra: &[&str]) -> std::process::Output {
+    let lib = cdylib("cocog-plugin-recenter");
+    let mut args = vec![
+        "stage",
+        "recenter",
+        path_str(input),
+        "-o",
+        path_str(output),
+        "--plugin-path",
+        path_str(&lib),
+    ];
+    args.extend_from_slice(extra);
+    cocog(&args)
+}
+
+fn assert_one_line_error(out: &std::process::Output, needles: &[&str]) {
+    let err = stderr(out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    let errors: Vec<&str> = err.lines().filter(|l| l.starts_with("error:")).collect();
+    assert_eq!(errors.len(), 1, "{err}");
+    for n in needles {
+        assert!(errors[0].contains(n), "{n:?} not in {err}");
+    }
+}
+
+#[test]
+fn missing_input_directory() {
+    let work = tempfile::tempdir().expect("tempdir");
+    let out = recenter(&work.path().join("nope"), &work.path().join("out"), &[]);
+    assert_one_line_error(&out, &["nope", "input does not exist"]);
+    assert!(listing(work.path()).is_empty());
+}
+
+#[test]
+fn missing_manifest() {
+    let work = tempfile::tempdir().expect("tempdir");
+    let input = work.path().join("empty");
+    std::fs::create_dir(&input).expect("mkdir");
+    let out = recenter(&input, &work.path().join("out"), &[]);
+    assert_one_line_error(&out, &["empty/scene.json", "No such file"]);
+    assert_eq!(listing(work.path()), vec!["empty"]);
+}
+
+#[test]
+fn corrupt_manifest() {
+    let work = tempfile::tempdir().expect("tempdir");
+    let input = work.path().join("scene");
+    write_tiny_scene(&input, 4, [0.0; 3], 1.0);
+    std::fs::write(
+        input.join("scene.json"),
+        "{\"format\": \"cocog.scene\", \"vers",
+    )
+    .expect("write");
+    let out = recenter(&input, &work.path().join("out"), &[]);
+    assert_one_line_error(
+        &out,
+        &["scene/scene.json", "not a valid scene manifest", "line 1"],
+    );
+    assert_eq!(listing(work.path()), vec!["scene"]);
+}
+
+#[test]
+fn unknown_major_version() {
+    let work = tempfile::tempdir().expect("tempdir");
+    let input = work.path().join("scene");
+    write_tiny_scene(&input, 4, [0.0; 3], 1.0);
+    let path = input.join("scene.json");
+    let text = std::fs::read_to_string(&path).expect("read");
+    std::fs::write(&path, text.replace("\"1.0\"", "\"7.2\"")).expect("write");
+    let out = recenter(&input, &work.path().join("out"), &[]);
+    assert_one_line_error(&out, &["scene.json", "version 7.2", "reads 1.x"]);
+}
+
+#[test]
+fn output_exists_is_refused_unless_forced() {
+    let work = tempfile::tempdir().expect("tempdir");
+    let input = work.path().join("scene");
+    write_tiny_scene(&input, 4, [1.0, 2.0, 3.0], 1.0);
+    let output = work.path().join("out");
+    std::fs::create_dir(&output).expect("mkdir");
+    std::fs::write(output.join("keep.txt"), "precious").expect("write");
+    let out = recenter(&input, &output, &[]);
+    assert_one_line_error(&out, &["out", "already exists", "--force"]);
+    assert!(
+        output.join("keep.txt").exists(),
+        "refused run must not touch the output"
+    );
+
+    let out = recenter(&input, &output, &["--force"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(output.join("scene.json").exists() && !output.join("keep.txt").exists());
+    assert_eq!(listing(work.path()), vec!["out", "scene"]);
+}
+
+#[test]
+fn bad_option_values_are_named() {
+    let work = tempfile::tempdir().expect("tempdir");
+    let input = work.path().join("scene");
+    write_tiny_scene(&input, 4, [0.0; 3], 1.0);
+    let out = recenter(&input, &work.path().join("o"), &["--set", "radius=\"big\""]);
+    assert_one_line_error(&out, &["option 'radius'", "expected float"]);
+    let out = recenter(&input, &work.path().join("o"), &["--set", "raduis=2"]);
+    assert_one_line_error(&out, &["no option 'raduis'", "radius"]);
+    assert_eq!(listing(work.path()), vec!["scene"]);
+}
+
+#[test]
+fn unavailable_stage_exits_3_and_says_what_brings_it() {
+    let out = cocog(&["train", "a", "-o", "b"]);
+    assert_eq!(out.status.code(), Some(3), "{}", stderr(&out));
+    assert!(stderr(&out).contains("issue #5"), "{}", stderr(&out));
+}
+
+#[test]
+fn usage_errors_exit_2() {
+    let out = cocog(&["ingest", "llff"]);
+    assert_eq!(out.status.code(), Some(2));
+    let out = cocog(&["stage", "recenter", "a", "-o", "b", "--set", "novalue"]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+}
