@@ -1,0 +1,71 @@
+//! The GPU loss and its gradient against the f64 reference (FD-checked in
+//! reference_loss_fd.rs), on a batch of two odd-sized images.
+
+mod common;
+
+use cocog_engine::ImageLoss;
+use cocog_engine::reference::loss::image_loss;
+use common::{Rng, gpu};
+
+#[test]
+fn gpu_loss_matches_reference() {
+    let Some(ctx) = gpu() else { return };
+    let (w, h, images) = (23usize, 17usize, 2usize);
+    let mut rng = Rng::new(12);
+    let npix = w * h * images;
+    let pred: Vec<[f32; 4]> = (0..npix)
+        .map(|_| std::array::from_fn(|_| rng.range_f32(0.0, 1.0)))
+        .collect();
+    // A target correlated with the prediction, so SSIM is far from zero.
+    let target: Vec<[f32; 4]> = pred
+        .iter()
+        .map(|p| std::array::from_fn(|k| (p[k] * 0.7 + rng.range_f32(0.0, 0.3)).min(1.0)))
+        .collect();
+    let loss = ImageLoss::new(ctx);
+    for lambda in [0.0f32, 0.2, 1.0] {
+        let out = loss.compute(
+            ctx,
+            &ctx.storage_from("pred", &pred),
+            &ctx.storage_from("target", &target),
+            w as u32,
+            h as u32,
+            images as u32,
+            lambda,
+        );
+        let gpu_loss = out.read_loss(ctx).unwrap();
+        let gpu_grad: Vec<[f32; 4]> = ctx.read(&out.v_pred, npix).unwrap();
+        let mut ref_loss = 0.0;
+        let mut ref_grad = Vec::new();
+        for i in 0..images {
+            let rgb = |v: &[[f32; 4]]| -> Vec<[f64; 3]> {
+                v[i * w * h..(i + 1) * w * h]
+                    .iter()
+                    .map(|p| [p[0], p[1], p[2]].map(f64::from))
+                    .collect()
+            };
+            let (l, g) = image_loss(&rgb(&pred), &rgb(&target), w, h, f64::from(lambda));
+            ref_loss += l / images as f64;
+            ref_grad.extend(g.into_iter().map(|g| g.map(|v| v / images as f64)));
+        }
+        assert!(
+            (gpu_loss - ref_loss).abs() < 1e-5 * ref_loss.abs().max(1e-3),
+            "λ={lambda}: loss {gpu_loss} vs {ref_loss}"
+        );
+        let scale = ref_grad
+            .iter()
+            .flatten()
+            .fold(0.0f64, |m, v| m.max(v.abs()));
+        for (p, (g, r)) in gpu_grad.iter().zip(&ref_grad).enumerate() {
+            for k in 0..3 {
+                let err = (f64::from(g[k]) - r[k]).abs();
+                assert!(
+                    err < 1e-3 * scale,
+                    "λ={lambda} pixel {p} channel {k}: {} vs {}",
+                    g[k],
+                    r[k]
+                );
+            }
+            assert_eq!(g[3], 0.0, "alpha gradient must stay zero");
+        }
+    }
+}
