@@ -1,5 +1,6 @@
 //! The wgpu side of the engine.
 
+mod adam;
 mod batch;
 mod buffers;
 mod context;
@@ -9,6 +10,7 @@ mod renderer;
 mod scan;
 mod sort;
 
+pub use adam::{Adam, AdamConfig, AdamMoments};
 pub use batch::{Batch, ImageSpec, ParamBuffers};
 pub use buffers::{GpuBuffer, MemoryTracker};
 pub use context::GpuContext;

@@ -1,0 +1,107 @@
+//! Adam optimiser step on GPU parameter buffers; see adam.wgsl.
+
+use super::GpuContext;
+use super::buffers::GpuBuffer;
+use super::kernel::{Kernel, shader};
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    n: u32,
+    lr: f32,
+    beta1: f32,
+    beta2: f32,
+    eps: f32,
+    bias1: f32,
+    bias2: f32,
+    pad: u32,
+}
+
+/// Hyper-parameters of one parameter group.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AdamConfig {
+    pub lr: f32,
+    pub beta1: f32,
+    pub beta2: f32,
+    pub eps: f32,
+}
+
+impl AdamConfig {
+    /// β = (0.9, 0.999) and ε = 1e-15, as 3DGS and CoCoGaussian configure torch's Adam.
+    pub fn with_lr(lr: f32) -> Self {
+        Self {
+            lr,
+            beta1: 0.9,
+            beta2: 0.999,
+            eps: 1e-15,
+        }
+    }
+}
+
+/// First and second moments of one parameter buffer of `len` floats.
+#[derive(Debug)]
+pub struct AdamMoments {
+    pub m: GpuBuffer,
+    pub v: GpuBuffer,
+    pub len: u32,
+}
+
+impl AdamMoments {
+    pub fn new(ctx: &GpuContext, len: u32) -> Self {
+        Self {
+            m: ctx.storage("adam m", u64::from(len) * 4),
+            v: ctx.storage("adam v", u64::from(len) * 4),
+            len,
+        }
+    }
+}
+
+#[derive(Debug)]
+pub struct Adam {
+    kernel: Kernel,
+}
+
+impl Adam {
+    pub fn new(ctx: &GpuContext) -> Self {
+        let module = shader(ctx, "adam", include_str!("adam.wgsl"));
+        Self {
+            kernel: Kernel::new(ctx, &module, "adam"),
+        }
+    }
+
+    /// Records step `t` (1-based) of Adam on the first `moments.len` floats of `param`.
+    pub fn encode(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        param: &wgpu::Buffer,
+        grad: &wgpu::Buffer,
+        moments: &AdamMoments,
+        config: &AdamConfig,
+        t: u32,
+    ) {
+        let t = i32::try_from(t.max(1)).unwrap_or(i32::MAX);
+        let params = ctx.uniform(&Params {
+            n: moments.len,
+            lr: config.lr,
+            beta1: config.beta1,
+            beta2: config.beta2,
+            eps: config.eps,
+            bias1: 1.0 - config.beta1.powi(t),
+            bias2: 1.0 - config.beta2.powi(t),
+            pad: 0,
+        });
+        self.kernel.dispatch_1d(
+            ctx,
+            encoder,
+            &[
+                (0, &params),
+                (1, param),
+                (2, grad),
+                (3, &moments.m),
+                (4, &moments.v),
+            ],
+            moments.len.div_ceil(256),
+        );
+    }
+}

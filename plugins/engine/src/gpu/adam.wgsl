@@ -1,0 +1,34 @@
+// Adam update of one flat f32 parameter buffer, with bias correction folded into the step
+// (the same arithmetic as torch.optim.Adam, which 3DGS and CoCoGaussian use).
+
+struct Params {
+    n: u32,
+    lr: f32,
+    beta1: f32,
+    beta2: f32,
+    eps: f32,
+    // 1 − β₁ᵗ and 1 − β₂ᵗ
+    bias1: f32,
+    bias2: f32,
+    pad: u32,
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read_write> param: array<f32>;
+@group(0) @binding(2) var<storage, read> grad: array<f32>;
+@group(0) @binding(3) var<storage, read_write> m1: array<f32>;
+@group(0) @binding(4) var<storage, read_write> m2: array<f32>;
+
+@compute @workgroup_size(256)
+fn adam(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let i = gid.x + gid.y * nwg.x * 256u;
+    if (i >= params.n) {
+        return;
+    }
+    let g = grad[i];
+    let m = params.beta1 * m1[i] + (1.0 - params.beta1) * g;
+    let v = params.beta2 * m2[i] + (1.0 - params.beta2) * g * g;
+    m1[i] = m;
+    m2[i] = v;
+    param[i] -= params.lr / params.bias1 * m / (sqrt(v / params.bias2) + params.eps);
+}
