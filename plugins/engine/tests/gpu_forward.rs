@@ -96,3 +96,38 @@ fn dense_scene_hits_early_termination() {
         background: [1.0, 1.0, 1.0],
     }]);
 }
+
+#[test]
+fn tile_culling_drops_intersections_without_changing_pixels() {
+    let Some(ctx) = gpu() else { return };
+    let cam = test_camera(64, 48, 0.3);
+    let mut g = random_scene(150, 0, 31, &cam);
+    // Elongated, faint Gaussians: their 3σ boxes cover many tiles they never reach.
+    for (i, s) in g.log_scales.iter_mut().enumerate() {
+        s[i % 3] += 1.5;
+    }
+    for o in &mut g.opacity_logits {
+        *o -= 2.0;
+    }
+    let g64 = Gaussians64::from(&g);
+    let boxed: u32 = (0..g.len())
+        .filter_map(|i| cocog_engine::reference::project(&g64, i, &cam))
+        .map(|p| (p.tile_max[0] - p.tile_min[0]) * (p.tile_max[1] - p.tile_min[1]))
+        .sum();
+    let view = View {
+        gaussians: &g,
+        camera: &cam,
+        background: [0.0; 3],
+    };
+    let batch = Batch::from_views(ctx, &[view]).unwrap();
+    let k = Renderer::new(ctx)
+        .forward(ctx, &batch)
+        .unwrap()
+        .num_intersections;
+    eprintln!("{k} intersections after the tile test, {boxed} in the 3σ boxes");
+    assert!(
+        k > 0 && k * 10 < boxed * 9,
+        "tile test removed too little: {k} of {boxed}"
+    );
+    compare(&[view]);
+}

@@ -25,7 +25,18 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     // Clamp in float before converting: out-of-range float→int conversions are not portable.
     let lo = vec2<u32>(clamp(floor((f.mean2d - f.radius) / TILE), vec2<f32>(0.0), tiles));
     let hi = vec2<u32>(clamp(ceil((f.mean2d + f.radius) / TILE), vec2<f32>(0.0), tiles));
-    if (lo.x >= hi.x || lo.y >= hi.y) {
+    // Below 1/255 opacity no pixel can pass the compositing cut-off.
+    let threshold = log(255.0 * f.opacity);
+    if (lo.x >= hi.x || lo.y >= hi.y || !(threshold >= 0.0)) {
+        return;
+    }
+    var count = 0u;
+    for (var y = lo.y; y < hi.y; y++) {
+        for (var x = lo.x; x < hi.x; x++) {
+            count += u32(tile_hits(f.mean2d, f.conic, threshold, vec2<u32>(x, y)));
+        }
+    }
+    if (count == 0u) {
         return;
     }
     projected[3u * g] = vec4<f32>(f.mean2d, f.t.z, f.opacity);
@@ -33,5 +44,5 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     projected[3u * g + 2u] = vec4<f32>(max(f.color_pre, vec3<f32>(0.0)), 0.0);
     rects[g] = vec4<u32>(lo.x | (lo.y << 16u), hi.x | (hi.y << 16u), f.image, 0u);
     depth_keys[g] = bitcast<u32>(f.t.z);
-    counts[g] = (hi.x - lo.x) * (hi.y - lo.y);
+    counts[g] = count;
 }

@@ -95,17 +95,22 @@ impl Renderer {
     /// paths on devices that have more); `true` is ignored where the device lacks the feature.
     pub fn with_options(ctx: &GpuContext, native_atomics: bool, subgroups: bool) -> Self {
         let common = include_str!("project_common.wgsl");
+        let tile_test = include_str!("tile_test.wgsl");
         let project = shader(
             ctx,
             "project",
-            &format!("{common}\n{}", include_str!("project.wgsl")),
+            &format!("{common}\n{tile_test}\n{}", include_str!("project.wgsl")),
         );
         let project_bwd = shader(
             ctx,
             "project_backward",
             &format!("{common}\n{}", include_str!("project_backward.wgsl")),
         );
-        let tiles = shader(ctx, "tiles", include_str!("tiles.wgsl"));
+        let tiles = shader(
+            ctx,
+            "tiles",
+            &format!("{tile_test}\n{}", include_str!("tiles.wgsl")),
+        );
         let raster = shader(ctx, "rasterize", include_str!("rasterize.wgsl"));
         let atomics = if native_atomics && ctx.float_atomics {
             include_str!("atomic_native.wgsl")
@@ -247,6 +252,7 @@ impl Renderer {
                 (4, &rects),
                 (5, &by_tile.keys),
                 (6, &by_tile.values),
+                (8, &projected),
             ],
             groups(n),
         );

@@ -19,6 +19,7 @@ struct Params {
 @group(0) @binding(5) var<storage, read_write> tile_keys: array<u32>;
 @group(0) @binding(6) var<storage, read_write> tile_values: array<u32>;
 @group(0) @binding(7) var<storage, read_write> ranges: array<vec2<u32>>;
+@group(0) @binding(8) var<storage, read> projected: array<vec4<f32>>;
 
 fn linear_id(gid: vec3<u32>, nwg: vec3<u32>) -> u32 {
     return gid.x + gid.y * nwg.x * 256u;
@@ -48,12 +49,18 @@ fn emit_keys(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
     let lo = vec2<u32>(r.x & 0xffffu, r.x >> 16u);
     let hi = vec2<u32>(r.y & 0xffffu, r.y >> 16u);
     let base = r.z * params.tiles_per_image;
+    let a = projected[3u * g];
+    let conic = projected[3u * g + 1u].xyz;
+    let threshold = log(255.0 * a.w);
     var out = offsets[s];
     for (var y = lo.y; y < hi.y; y++) {
         for (var x = lo.x; x < hi.x; x++) {
-            tile_keys[out] = base + y * params.tiles_x + x;
-            tile_values[out] = g;
-            out++;
+            // Same test as the count in project.wgsl, so exactly counts[g] keys are written.
+            if (tile_hits(a.xy, conic, threshold, vec2<u32>(x, y))) {
+                tile_keys[out] = base + y * params.tiles_x + x;
+                tile_values[out] = g;
+                out++;
+            }
         }
     }
 }
