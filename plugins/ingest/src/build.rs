@@ -1,0 +1,213 @@
+//! Turns the views a dataset reader found into a scene directory: split, image checks,
+//! optional downscaling, camera de-duplication, up vector, points and bounds.
+
+use std::path::{Path, PathBuf};
+
+use cocog_formats::PointCloud;
+use cocog_formats::colmap::Pinhole;
+use cocog_formats::images::{downscaled_size, image_size, prescaled_path, write_downscaled};
+use cocog_formats::pose::Mat4;
+use cocog_pipeline::{Bounds, Camera, Context, Scene, Split, StageError, View};
+use glam::DVec3;
+use serde_json::{Value, json};
+
+use crate::input_error;
+
+/// One view as a reader found it, before any checks.
+pub(crate) struct RawView {
+    /// View name and sort key: the image name as the dataset lists it.
+    pub name: String,
+    /// The full-resolution image.
+    pub image: PathBuf,
+    pub world_from_camera: Mat4,
+    /// Intrinsics for an image of `size` pixels.
+    pub intrinsics: Pinhole,
+    pub size: (u32, u32),
+    /// The split the dataset itself declares, if any.
+    pub split: Option<Split>,
+    pub depth: Option<PathBuf>,
+    /// Where the view was declared, for error messages.
+    pub source: String,
+}
+
+pub(crate) struct Ingested {
+    pub views: Vec<RawView>,
+    pub points: Option<PointCloud>,
+    pub bounds: Option<Bounds>,
+    /// The `hold=N` marker of the dataset, if present.
+    pub hold_marker: Option<u32>,
+}
+
+pub(crate) struct Settings {
+    pub downscale: u32,
+    /// 0: use the dataset's own split (per-frame splits, else the hold=N marker, else 8).
+    pub hold: u32,
+}
+
+fn absolute(p: &Path) -> String {
+    std::fs::canonicalize(p)
+        .unwrap_or_else(|_| p.to_path_buf())
+        .to_string_lossy()
+        .into_owned()
+}
+
+/// Unit vector opposite the mean camera "down" axis: OpenCV cameras have +y down.
+fn estimate_up(views: &[View]) -> Option<[f64; 3]> {
+    let sum: DVec3 = views
+        .iter()
+        .map(|v| {
+            -DVec3::new(
+                v.world_from_camera[0][1],
+                v.world_from_camera[1][1],
+                v.world_from_camera[2][1],
+            )
+        })
+        .sum();
+    (sum.length() > 1e-9).then(|| sum.normalize().to_array())
+}
+
+/// Builds the scene in `out` (an existing, empty directory). Returns it and a summary.
+pub(crate) fn build_scene(
+    dataset: &Path,
+    mut data: Ingested,
+    settings: &Settings,
+    out: &Path,
+    ctx: &dyn Context,
+) -> Result<(Scene, Value), StageError> {
+    if data.views.is_empty() {
+        return Err(StageError::Input(format!(
+            "{}: the dataset has no views",
+            dataset.display()
+        )));
+    }
+    data.views.sort_by(|a, b| a.name.cmp(&b.name));
+    if let Some(w) = data.views.windows(2).find(|w| w[0].name == w[1].name) {
+        return Err(StageError::Input(format!(
+            "{}: two views are named {:?}",
+            w[1].source, w[1].name
+        )));
+    }
+    let declared = data.views.iter().all(|v| v.split.is_some());
+    let hold = match settings.hold {
+        0 => data.hold_marker.unwrap_or(8),
+        h => h,
+    };
+    let use_declared = settings.hold == 0 && declared;
+    let n = data.views.len() as u64;
+    let mut scene = Scene::default();
+    for (i, raw) in data.views.iter().enumerate() {
+        ctx.check_cancelled()?;
+        ctx.progress("check images", i as u64, n);
+        let full = image_size(&raw.image).map_err(|e| {
+            StageError::Input(format!("view {:?} (from {}): {e}", raw.name, raw.source))
+        })?;
+        if full != raw.size {
+            return Err(StageError::Input(format!(
+                "{}: image is {}×{} but the camera of view {:?} (from {}) is {}×{}",
+                raw.image.display(),
+                full.0,
+                full.1,
+                raw.name,
+                raw.source,
+                raw.size.0,
+                raw.size.1
+            )));
+        }
+        let (image, size) = if settings.downscale <= 1 {
+            (absolute(&raw.image), full)
+        } else if let Some(pre) = prescaled_path(dataset, &raw.image, settings.downscale) {
+            let size = image_size(&pre).map_err(input_error)?;
+            let want = downscaled_size(full.0, full.1, settings.downscale);
+            if size.0.abs_diff(want.0) > 1 || size.1.abs_diff(want.1) > 1 {
+                return Err(StageError::Input(format!(
+                    "{}: image is {}×{}, expected about {}×{} ({}×{} shrunk by {})",
+                    pre.display(),
+                    size.0,
+                    size.1,
+                    want.0,
+                    want.1,
+                    full.0,
+                    full.1,
+                    settings.downscale
+                )));
+            }
+            (absolute(&pre), size)
+        } else {
+            let rel = format!(
+                "images/{}.png",
+                raw.name
+                    .replace(['/', '\\'], "_")
+                    .rsplit_once('.')
+                    .map_or(raw.name.as_str(), |(stem, _)| stem)
+            );
+            let dst = out.join(&rel);
+            std::fs::create_dir_all(out.join("images"))
+                .map_err(|e| StageError::io(out.join("images"), e))?;
+            let size =
+                write_downscaled(&raw.image, &dst, settings.downscale).map_err(input_error)?;
+            (rel, size)
+        };
+        // Pixel-corner convention: scaling the image scales every intrinsic by the same ratio.
+        let (sx, sy) = (
+            f64::from(size.0) / f64::from(full.0),
+            f64::from(size.1) / f64::from(full.1),
+        );
+        let cam = Camera {
+            id: 0,
+            width: size.0,
+            height: size.1,
+            fx: raw.intrinsics.fx * sx,
+            fy: raw.intrinsics.fy * sy,
+            cx: raw.intrinsics.cx * sx,
+            cy: raw.intrinsics.cy * sy,
+        };
+        let id = match scene.cameras.iter().find(|c| {
+            Camera {
+                id: 0,
+                ..(*c).clone()
+            } == cam
+        }) {
+            Some(c) => c.id,
+            None => {
+                let id = scene.cameras.len() as u32 + 1;
+                scene.cameras.push(Camera { id, ..cam });
+                id
+            }
+        };
+        let split = match (use_declared, raw.split) {
+            (true, Some(s)) => s,
+            // A `hold=0` marker (BAD-Gaussians) means every view trains.
+            _ if hold > 0 && (i as u32).is_multiple_of(hold) => Split::Test,
+            _ => Split::Train,
+        };
+        scene.views.push(View {
+            name: raw.name.clone(),
+            image,
+            camera: id,
+            world_from_camera: raw.world_from_camera,
+            split,
+            lens: None,
+            depth: raw.depth.as_deref().map(absolute),
+        });
+    }
+    ctx.progress("check images", n, n);
+    scene.up = estimate_up(&scene.views);
+    scene.bounds = data.bounds;
+    let points = data.points.as_ref().map_or(0, PointCloud::len);
+    if let Some(cloud) = data.points.as_ref().filter(|c| !c.is_empty()) {
+        cocog_formats::ply::write_points(&out.join("points.ply"), cloud).map_err(input_error)?;
+        scene.points = Some("points.ply".to_owned());
+    }
+    scene.save(out)?;
+    let test = scene.views_in(Split::Test).count();
+    let summary = json!({
+        "views": scene.views.len(),
+        "train": scene.views.len() - test,
+        "test": test,
+        "split": if use_declared { "dataset".to_owned() } else { format!("hold={hold}") },
+        "cameras": scene.cameras.len(),
+        "points": points,
+        "downscale": settings.downscale,
+    });
+    Ok((scene, summary))
+}
