@@ -1,4 +1,14 @@
 //! Scoring folders of images into the `metrics.json` report.
+//!
+//! `metrics.json` (format `cocog-metrics`, version 1):
+//! - `pred_dir`, `gt_dir`, `count`;
+//! - `conventions`: metric name → the exact definition used (only metrics that were computed);
+//! - `lpips`: `weights` (net → file used) and `note` (why LPIPS is missing, if it is);
+//! - `mean`: the mean of the per-image values of each metric;
+//! - `images[]`: `name` (the shared file stem), `pred`, `gt`, `width`, `height`, `psnr`,
+//!   `ssim_deblurnerf`, `ssim_gaussian11`, and `lpips_alex` / `lpips_vgg` when computed.
+//!
+//! PSNR is `null` when infinite (identical images); a mean over such an image is `null` too.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
