@@ -12,9 +12,9 @@ mod types;
 
 pub use error::EngineError;
 pub use gpu::{
-    Adam, AdamConfig, AdamMoments, Batch, ForwardState, GpuBuffer, GpuContext, ImageLoss,
-    ImageSpec, LossOutput, MemoryTracker, ParamBuffers, PrefixSum, RadixSort, RenderedImage,
-    Renderer, SortBuffers,
+    Adam, AdamConfig, AdamMoments, Batch, ForwardState, GpuBuffer, GpuContext, Gradients,
+    ImageLoss, ImageSpec, LossOutput, MemoryTracker, ParamBuffers, PrefixSum, RadixSort,
+    RenderedImage, Renderer, SortBuffers,
 };
 pub use types::{
     ALPHA_MAX, ALPHA_MIN, Camera, GaussianGrads, GaussianParams, LOW_PASS, MAX_SH_DEGREE,

@@ -3,7 +3,7 @@
 
 mod common;
 
-use cocog_engine::reference::{Gaussians64, render_backward};
+use cocog_engine::reference::{Gaussians64, raster_backward, render_backward};
 use cocog_engine::{Batch, Camera, GaussianParams, GpuContext, Renderer, View};
 use common::{gpu, random_scene, random_weights, test_camera};
 
@@ -42,6 +42,7 @@ fn check(ctx: &GpuContext, renderer: &Renderer, views: &[View<'_>], seed: u64) {
     for (i, view) in views.iter().enumerate() {
         let spec = batch.images[i];
         let gpu = grads
+            .params
             .read_grads(ctx, spec.first, spec.count)
             .unwrap()
             .scalars();
@@ -51,6 +52,23 @@ fn check(ctx: &GpuContext, renderer: &Renderer, views: &[View<'_>], seed: u64) {
         let bg = view.background.map(f64::from);
         let cpu = render_backward(&g64, view.camera, bg, &w.0, &w.1, &w.2).scalars();
         let names = group_names(view.gaussians);
+        let v_proj_cpu = raster_backward(&g64, view.camera, bg, &w.0, &w.1, &w.2);
+        let v_proj_gpu: Vec<[f32; 10]> = ctx
+            .read_at(&grads.v_projected, spec.first as usize, spec.count as usize)
+            .unwrap();
+        let scale = v_proj_cpu
+            .iter()
+            .map(|v| v.v_mean2d[0].abs())
+            .fold(0.0, f64::max);
+        for (k, (gv, cv)) in v_proj_gpu.iter().zip(&v_proj_cpu).enumerate() {
+            for (&a, &b) in gv[..2].iter().zip(&cv.v_mean2d) {
+                let a = f64::from(a);
+                assert!(
+                    (a - b).abs() <= 5e-3 * b.abs() + 2e-4 * scale,
+                    "v_mean2d[{k}]: {a} vs {b}"
+                );
+            }
+        }
         assert_eq!(gpu.len(), cpu.len());
         for name in ["means", "log_scales", "quats", "opacity_logits", "sh"] {
             let idx: Vec<usize> = (0..cpu.len()).filter(|&k| names[k] == name).collect();

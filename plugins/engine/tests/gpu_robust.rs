@@ -83,7 +83,7 @@ fn non_finite_and_degenerate_gaussians_are_contained() {
         &ctx.storage_from("v_rgba", &v_rgba),
         &ctx.storage_from("v_depth", &v_depth),
     );
-    let gpu_grads = grads.read_grads(ctx, 0, g.len() as u32).unwrap();
+    let gpu_grads = grads.params.read_grads(ctx, 0, g.len() as u32).unwrap();
     assert!(
         gpu_grads.scalars().iter().all(|v| v.is_finite()),
         "a gradient is not finite"

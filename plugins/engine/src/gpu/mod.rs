@@ -15,6 +15,6 @@ pub use batch::{Batch, ImageSpec, ParamBuffers};
 pub use buffers::{GpuBuffer, MemoryTracker};
 pub use context::GpuContext;
 pub use loss::{ImageLoss, LossOutput};
-pub use renderer::{ForwardState, RenderedImage, Renderer};
+pub use renderer::{ForwardState, Gradients, RenderedImage, Renderer};
 pub use scan::PrefixSum;
 pub use sort::{RadixSort, SortBuffers};

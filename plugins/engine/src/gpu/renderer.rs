@@ -70,6 +70,16 @@ pub struct ForwardState {
     pub num_intersections: u32,
 }
 
+/// Output of `Renderer::backward`.
+#[derive(Debug)]
+pub struct Gradients {
+    /// Gradients of every parameter, laid out like the batch's parameters.
+    pub params: ParamBuffers,
+    /// Screen-space gradients per Gaussian, 10 floats each: mean2d (2), conic (3), colour (3),
+    /// opacity, depth. ‖mean2d‖ is the statistic 3DGS-style densification accumulates.
+    pub v_projected: GpuBuffer,
+}
+
 /// One image read back to the CPU, row-major.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RenderedImage {
@@ -307,7 +317,7 @@ impl Renderer {
         state: &ForwardState,
         v_rgba: &wgpu::Buffer,
         v_depth: &wgpu::Buffer,
-    ) -> ParamBuffers {
+    ) -> Gradients {
         let n = batch.params.num_gaussians;
         let (tiles_x, tiles_y) = batch.tiles();
         let v_proj = ctx.storage("v_projected", u64::from(n) * 40);
@@ -354,7 +364,10 @@ impl Renderer {
             groups(n),
         );
         ctx.queue.submit([encoder.finish()]);
-        grads
+        Gradients {
+            params: grads,
+            v_projected: v_proj,
+        }
     }
 }
 

@@ -10,7 +10,7 @@ mod raster;
 pub mod sh;
 
 pub use project::{Projected, ProjectedGrad, project, project_backward};
-pub use raster::{Image64, render, render_backward};
+pub use raster::{Image64, raster_backward, render, render_backward};
 
 use crate::types::{GaussianGrads, GaussianParams};
 

@@ -132,6 +132,24 @@ pub fn render_backward(
     v_alpha: &[f64],
     v_depth: &[f64],
 ) -> Grads64 {
+    let v_proj = raster_backward(g, cam, background, v_color, v_alpha, v_depth);
+    let mut grads = Grads64::zeros_like(g);
+    for (i, vp) in v_proj.iter().enumerate() {
+        project_backward(g, i, cam, vp, &mut grads);
+    }
+    grads
+}
+
+/// The compositing half of `render_backward`: gradients with respect to each Gaussian's
+/// screen-space footprint.
+pub fn raster_backward(
+    g: &Gaussians64,
+    cam: &Camera,
+    background: [f64; 3],
+    v_color: &[[f64; 3]],
+    v_alpha: &[f64],
+    v_depth: &[f64],
+) -> Vec<ProjectedGrad> {
     let proj: Vec<_> = (0..g.len()).map(|i| project(g, i, cam)).collect();
     let lists = tile_lists(&proj, cam);
     let (tx, _) = cam.tiles();
@@ -174,9 +192,5 @@ pub fn render_backward(
             }
         }
     }
-    let mut grads = Grads64::zeros_like(g);
-    for (i, vp) in v_proj.iter().enumerate() {
-        project_backward(g, i, cam, vp, &mut grads);
-    }
-    grads
+    v_proj
 }
