@@ -142,3 +142,64 @@ fn a_library_without_the_entry_symbol_is_refused() {
         "{err}"
     );
 }
+
+#[test]
+fn a_plugin_replaces_a_built_in_only_when_asked() {
+    let lib = cdylib("cocog-test-misbehaving");
+    let dir = plugin_dir(&[&lib]);
+    let plugin_dir_arg = dir.path().to_str().expect("utf-8");
+    let listing_out = cocog(&["plugins", "--plugin-path", plugin_dir_arg]);
+    let table = cocog_tests::stdout(&listing_out);
+    let eval_rows: Vec<&str> = table.lines().filter(|l| l.starts_with("eval ")).collect();
+    assert_eq!(eval_rows.len(), 2, "{table}");
+    assert!(
+        eval_rows
+            .iter()
+            .any(|r| r.contains("built-in") && !r.contains("inactive")),
+        "{table}"
+    );
+    assert!(
+        eval_rows
+            .iter()
+            .any(|r| r.contains("misbehaving (inactive)")),
+        "{table}"
+    );
+
+    let work = tempfile::tempdir().expect("tempdir");
+    let (pred, gt) = (work.path().join("pred"), work.path().join("gt"));
+    std::fs::create_dir(&pred).expect("mkdir");
+    std::fs::create_dir(&gt).expect("mkdir");
+    let args = |extra: &[&'static str]| {
+        let mut v = vec![
+            "eval".to_owned(),
+            "--pred".to_owned(),
+            pred.display().to_string(),
+            "--gt".to_owned(),
+            gt.display().to_string(),
+            "--plugin-path".to_owned(),
+            plugin_dir_arg.to_owned(),
+        ];
+        v.extend(extra.iter().map(|s| (*s).to_owned()));
+        v
+    };
+    let run = |a: Vec<String>| cocog(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    // Without --use the built-in runs (and complains about the empty folder itself).
+    let out = run(args(&[]));
+    assert!(
+        !stderr(&out).contains("misbehaving plugin's eval ran"),
+        "{}",
+        stderr(&out)
+    );
+    let out = run(args(&["--use", "eval=misbehaving"]));
+    assert!(
+        stderr(&out).contains("misbehaving plugin's eval ran"),
+        "{}",
+        stderr(&out)
+    );
+    let out = run(args(&["--use", "eval=nobody"]));
+    assert!(
+        stderr(&out).contains("no loaded plugin named 'nobody'"),
+        "{}",
+        stderr(&out)
+    );
+}

@@ -5,6 +5,8 @@ use serde_json::Value;
 
 struct Explode;
 struct Refuse;
+/// Shares its name with the built-in `eval`, to test that plugins never shadow silently.
+struct ShadowEval;
 
 fn info(name: &str, description: &str) -> StageInfo {
     StageInfo {
@@ -42,8 +44,28 @@ impl Stage for Refuse {
     }
 }
 
+impl Stage for ShadowEval {
+    fn info(&self) -> StageInfo {
+        let mut i = info("eval", "a stand-in for the built-in eval");
+        i.kind = StageKind::Eval;
+        i.output = OutputKind::File;
+        i.options = vec![cocog_pipeline::OptionSpec::required(
+            "gt",
+            cocog_pipeline::OptionKind::Path,
+            "ground truth",
+        )];
+        i
+    }
+
+    fn run(&self, _req: &StageRequest, _ctx: &dyn Context) -> Result<Value, StageError> {
+        Err(StageError::Input(
+            "the misbehaving plugin's eval ran".to_owned(),
+        ))
+    }
+}
+
 fn stages() -> Vec<Box<dyn Stage>> {
-    vec![Box::new(Explode), Box::new(Refuse)]
+    vec![Box::new(Explode), Box::new(Refuse), Box::new(ShadowEval)]
 }
 
 cocog_pipeline::export_plugin!(name: "misbehaving", version: "0.0.1", stages: stages);
