@@ -170,7 +170,7 @@ fn densify_a_bench_scene() {
         }
     }
     // Running again on a scene without points fails with the field named.
-    let mut bare = scene.clone();
+    let mut bare = scene;
     bare.points = None;
     std::fs::create_dir(tmp.path().join("bare")).unwrap();
     bare.save(&tmp.path().join("bare")).unwrap();
