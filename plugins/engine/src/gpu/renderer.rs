@@ -29,6 +29,8 @@ struct TileParams {
     num_intersections: u32,
     tiles_x: u32,
     tiles_per_image: u32,
+    sentinel_tile: u32,
+    pad: [u32; 3],
 }
 
 #[repr(C)]
@@ -223,6 +225,8 @@ impl Renderer {
             num_intersections,
             tiles_x,
             tiles_per_image: tiles_x * tiles_y,
+            sentinel_tile: tiles_x * tiles_y * batch.num_images(),
+            pad: [0; 3],
         };
         let params = ctx.uniform(&tile_params(0));
         self.gather_counts.dispatch_1d(
@@ -248,7 +252,8 @@ impl Renderer {
             ctx.storage("tile values", u64::from(k) * 4),
             k,
         );
-        let ranges = ctx.storage("tile ranges", u64::from(total_tiles) * 8);
+        // One extra range for the sentinel tile, which no workgroup reads.
+        let ranges = ctx.storage("tile ranges", (u64::from(total_tiles) + 1) * 8);
         let params = ctx.uniform(&tile_params(k));
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         self.emit_keys.dispatch_1d(
@@ -266,7 +271,8 @@ impl Renderer {
             ],
             groups(n),
         );
-        let tile_bits = u32::BITS - (total_tiles - 1).leading_zeros();
+        // Keys run up to the sentinel `total_tiles` inclusive.
+        let tile_bits = u32::BITS - total_tiles.leading_zeros();
         self.sort
             .encode(ctx, &self.scan, &mut encoder, &mut by_tile, k, tile_bits);
         self.tile_ranges.dispatch_1d(

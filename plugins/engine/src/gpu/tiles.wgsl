@@ -9,6 +9,11 @@ struct Params {
     num_intersections: u32,
     tiles_x: u32,
     tiles_per_image: u32,
+    // One past the last real tile: pads key slots the emission did not fill.
+    sentinel_tile: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -53,15 +58,22 @@ fn emit_keys(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
     let conic = projected[3u * g + 1u].xyz;
     let threshold = log(255.0 * a.w);
     var out = offsets[s];
+    let stop = out + counts[g];
     for (var y = lo.y; y < hi.y; y++) {
-        for (var x = lo.x; x < hi.x; x++) {
-            // Same test as the count in project.wgsl, so exactly counts[g] keys are written.
+        for (var x = lo.x; x < hi.x && out < stop; x++) {
+            // Same test as the count in project.wgsl, so exactly counts[g] keys are written;
+            // the bound and the padding below only guard against a compiler evaluating the
+            // two copies differently, which would otherwise overwrite other Gaussians' keys.
             if (tile_hits(a.xy, conic, threshold, vec2<u32>(x, y))) {
                 tile_keys[out] = base + y * params.tiles_x + x;
                 tile_values[out] = g;
                 out++;
             }
         }
+    }
+    for (; out < stop; out++) {
+        tile_keys[out] = params.sentinel_tile;
+        tile_values[out] = g;
     }
 }
 
