@@ -1,0 +1,64 @@
+//! The `export` stage: writes a scene's Gaussians to one file, `.ply` (INRIA 3DGS, every viewer
+//! reads it) or `.glb` (glTF `KHR_gaussian_splatting`, the standards-track alternative).
+
+use cocog_formats::glb::write_glb;
+use cocog_formats::ply::{read_splats, write_splats};
+use cocog_pipeline::{
+    Context, OptionSpec, OutputKind, Scene, Stage, StageError, StageInfo, StageKind, StageRequest,
+};
+use serde_json::{Value, json};
+
+pub struct Export;
+
+/// The signed world axis closest to `up`, as Brush's `Vertical axis:` PLY comment spells it.
+pub fn axis_name(up: [f64; 3]) -> String {
+    let (i, v) = up
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
+        .expect("three components");
+    format!("{}{}", if *v < 0.0 { "-" } else { "" }, ["x", "y", "z"][i])
+}
+
+impl Stage for Export {
+    fn info(&self) -> StageInfo {
+        StageInfo {
+            name: "export".to_owned(),
+            kind: StageKind::Export,
+            output: OutputKind::File,
+            description: "Write the scene's Gaussians as an INRIA 3DGS .ply or a glTF KHR_gaussian_splatting .glb".to_owned(),
+            options: vec![OptionSpec::string("format", "ply", "ply | glb")],
+        }
+    }
+
+    fn run(&self, req: &StageRequest, ctx: &dyn Context) -> Result<Value, StageError> {
+        let format = req.options.get_str("format").unwrap_or("ply");
+        if !matches!(format, "ply" | "glb") {
+            return Err(StageError::Options(format!(
+                "export: option 'format' must be ply or glb, got {format:?}"
+            )));
+        }
+        let scene = Scene::load(&req.input)?;
+        let stored = scene.gaussians.as_deref().ok_or_else(|| {
+            StageError::Input(format!("{}: field `gaussians`: the scene has no trained Gaussians to export (run train first)", req.input.join("scene.json").display()))
+        })?;
+        let splats = read_splats(&Scene::resolve(&req.input, stored))
+            .map_err(|e| StageError::Input(e.to_string()))?;
+        let result = match format {
+            "ply" => write_splats(&req.output, &splats, scene.up.map(axis_name).as_deref()),
+            _ => write_glb(&req.output, &splats),
+        };
+        result.map_err(|e| StageError::Input(e.to_string()))?;
+        ctx.info(&format!(
+            "export: wrote {} Gaussians (SH degree {}) as {format}",
+            splats.len(),
+            splats.sh_degree
+        ));
+        Ok(json!({"format": format, "gaussians": splats.len(), "sh_degree": splats.sh_degree}))
+    }
+}
+
+/// The export stage, for the CLI to register.
+pub fn stages() -> Vec<Box<dyn Stage>> {
+    vec![Box::new(Export)]
+}
