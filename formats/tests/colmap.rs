@@ -290,6 +290,8 @@ fn we_read_what_pycolmap_reads_and_writes() {
         );
         let dump: serde_json::Value = serde_json::from_str(&out).unwrap();
         assert_matches_pycolmap(&ours, &dump);
+        // Our text reader agrees with pycolmap too (it read the .bin; COLMAP's .txt is 17 digits).
+        assert_matches_pycolmap(&colmap::read_txt(&scene.join("sparse/0")).unwrap(), &dump);
         // pycolmap 4 writes rigs.bin and frames.bin too; our reader ignores them and must still agree.
         let theirs = colmap::read_bin(rewritten.path()).unwrap();
         assert_matches_pycolmap(&theirs, &dump);
