@@ -74,7 +74,7 @@ pub fn read_txt(dir: &Path) -> Result<Model> {
 pub(crate) fn parse_cameras(path: &Path, text: &str) -> Result<Vec<Camera>> {
     let mut out = Vec::new();
     for line in data_lines(path, text).filter(|l| !l.tokens.is_empty()) {
-        let name = line.tokens[0..].get(1).copied().unwrap_or("");
+        let name = line.tokens.get(1).copied().unwrap_or("");
         let model = CameraModel::from_name(name).ok_or_else(|| {
             line.err(
                 "MODEL",
