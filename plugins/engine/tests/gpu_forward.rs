@@ -14,9 +14,41 @@ fn compare(views: &[View<'_>]) {
     let state = renderer.forward(ctx, &batch).unwrap();
     assert!(state.num_intersections > 0);
     let images = state.read_images(ctx, &batch).unwrap();
+    let projected: Vec<[f32; 12]> = ctx
+        .read(&state.projected, batch.params.num_gaussians as usize)
+        .unwrap();
     for (i, (view, img)) in views.iter().zip(&images).enumerate() {
         let bg = view.background.map(f64::from);
-        let reference = render(&Gaussians64::from(view.gaussians), view.camera, bg);
+        let g64 = Gaussians64::from(view.gaussians);
+        let reference = render(&g64, view.camera, bg);
+        // Visibility and screen footprint, as densification will read them. The GPU may also
+        // drop Gaussians the reference keeps when they reach no pixel above 1/255.
+        let first = batch.images[i].first as usize;
+        let mut visible = 0;
+        for (j, p) in projected[first..first + view.gaussians.len()]
+            .iter()
+            .enumerate()
+        {
+            match cocog_engine::reference::project(&g64, j, view.camera) {
+                Some(r) if p[7] > 0.0 => {
+                    visible += 1;
+                    assert!(
+                        (f64::from(p[0]) - r.mean2d[0]).abs() < 1e-3,
+                        "mean2d of {j}"
+                    );
+                    assert!(
+                        (f64::from(p[2]) - r.depth).abs() < 1e-5 * r.depth,
+                        "depth of {j}"
+                    );
+                }
+                Some(_) => {}
+                None => assert_eq!(p[7], 0.0, "culled Gaussian {j} has a radius"),
+            }
+        }
+        assert!(
+            visible * 2 > view.gaussians.len(),
+            "only {visible} Gaussians visible"
+        );
         let (mut worst_c, mut worst_a, mut worst_d) = (0.0f64, 0.0f64, 0.0f64);
         for p in 0..img.color.len() {
             for k in 0..3 {

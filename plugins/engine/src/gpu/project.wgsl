@@ -40,7 +40,7 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
         return;
     }
     projected[3u * g] = vec4<f32>(f.mean2d, f.t.z, f.opacity);
-    projected[3u * g + 1u] = vec4<f32>(f.conic, 0.0);
+    projected[3u * g + 1u] = vec4<f32>(f.conic, f.radius);
     projected[3u * g + 2u] = vec4<f32>(max(f.color_pre, vec3<f32>(0.0)), 0.0);
     rects[g] = vec4<u32>(lo.x | (lo.y << 16u), hi.x | (hi.y << 16u), f.image, 0u);
     depth_keys[g] = bitcast<u32>(f.t.z);

@@ -65,7 +65,10 @@ pub struct ForwardState {
     pub depth: GpuBuffer,
     final_t: GpuBuffer,
     last: GpuBuffer,
-    projected: GpuBuffer,
+    /// Per Gaussian, three vec4: (mean2d, camera z, opacity), (conic xx, xy, yy, radius in
+    /// pixels), (rgb, 0). All zero for culled Gaussians, so radius > 0 marks visibility
+    /// (what densification's max-radius statistic needs).
+    pub projected: GpuBuffer,
     ranges: GpuBuffer,
     tile_values: GpuBuffer,
     /// (tile, Gaussian) pairs this pass composited from.
