@@ -19,6 +19,10 @@ fn check(n: usize, sh_degree: u32, seed: u64) {
     let cam = test_camera(64, 48, 0.2);
     let bg = [0.2, 0.5, 0.9];
     let mut g = Gaussians64::from(&random_scene(n, sh_degree, seed, &cam));
+    // Push one colour channel below zero so the clamp (and its zero gradient) is exercised.
+    let stride = 3 * (sh_degree as usize + 1).pow(2);
+    g.sh[0] = -4.0;
+    g.sh[stride + stride / 3] = -4.0;
     let w = random_weights(64 * 48, seed + 1);
     let analytic = render_backward(&g, &cam, bg, &w.0, &w.1, &w.2).scalars();
     let eps = 1e-6;
