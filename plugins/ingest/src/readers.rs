@@ -189,14 +189,11 @@ pub(crate) fn read_nerf(dataset: &Path) -> Result<Ingested, StageError> {
                 Some("train") => Some(Split::Train),
                 _ => None,
             };
-            let name = Path::new(&f.file_path)
-                .file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_default();
-            let name = if Path::new(&name).extension().is_none() {
-                format!("{name}.png")
+            let rel = f.file_path.trim_start_matches("./");
+            let name = if Path::new(rel).extension().is_none() {
+                format!("{rel}.png")
             } else {
-                name
+                rel.to_owned()
             };
             Ok(RawView {
                 name,
@@ -209,7 +206,30 @@ pub(crate) fn read_nerf(dataset: &Path) -> Result<Ingested, StageError> {
                 source,
             })
         })
-        .collect::<Result<Vec<_>, StageError>>()?;
+        .collect::<Result<Vec<RawView>, StageError>>()?;
+    // Name views by file name like the other layouts, unless that is ambiguous (Blender's
+    // train/r_0 and test/r_0): then by the path as the file gives it.
+    let base = |v: &RawView| {
+        let n = Path::new(&v.name).file_name();
+        n.map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    };
+    let mut bases: Vec<String> = views.iter().map(base).collect();
+    bases.sort();
+    let unique = bases.windows(2).all(|w| w[0] != w[1]);
+    let views = views
+        .into_iter()
+        .map(|v| {
+            if unique {
+                RawView {
+                    name: base(&v),
+                    ..v
+                }
+            } else {
+                v
+            }
+        })
+        .collect();
     Ok(Ingested {
         views,
         points: None,

@@ -208,3 +208,35 @@ fn bad_datasets_fail_clearly() {
         .to_string();
     assert!(err.contains("does not exist"), "{err}");
 }
+
+#[test]
+fn blender_layout_with_clashing_file_names() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    for split in ["train", "test"] {
+        std::fs::create_dir(d.join(split)).unwrap();
+        image::RgbaImage::from_pixel(8, 8, image::Rgba([255, 0, 0, 128]))
+            .save(d.join(format!("{split}/r_0.png")))
+            .unwrap();
+        let pose = [
+            [1.0, 0.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0, 4.0],
+            [0.0, 0.0, 0.0, 1.0],
+        ];
+        let doc = json!({"camera_angle_x": 0.69, "frames": [{"file_path": format!("./{split}/r_0"), "transform_matrix": pose}]});
+        std::fs::write(d.join(format!("transforms_{split}.json")), doc.to_string()).unwrap();
+    }
+    let (dir, summary) = run("ingest-nerf", d, json!({})).unwrap();
+    assert_eq!(
+        (summary["train"].as_u64(), summary["test"].as_u64()),
+        (Some(1), Some(1))
+    );
+    let s = scene_of(&dir);
+    let names: Vec<&str> = s.views.iter().map(|v| v.name.as_str()).collect();
+    assert_eq!(names, ["test/r_0.png", "train/r_0.png"]);
+    let cam = &s.cameras[0];
+    assert!((cam.fx - 4.0 / (0.345_f64).tan()).abs() < 1e-9 && cam.cx == 4.0);
+    // OpenGL +z back becomes OpenCV +z forward: the camera at z=4 looks towards −z.
+    assert_eq!(s.views[0].world_from_camera[2][2], -1.0);
+}
