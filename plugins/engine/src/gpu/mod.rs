@@ -9,12 +9,14 @@ mod loss;
 mod renderer;
 mod scan;
 mod sort;
+mod state;
 
 pub use adam::{Adam, AdamConfig, AdamMoments};
 pub use batch::{Batch, ImageSpec, ParamBuffers};
 pub use buffers::{GpuBuffer, MemoryTracker};
 pub use context::GpuContext;
 pub use loss::{ImageLoss, LossOutput};
-pub use renderer::{ForwardState, Gradients, RenderedImage, Renderer};
+pub use renderer::Renderer;
 pub use scan::PrefixSum;
 pub use sort::{RadixSort, SortBuffers};
+pub use state::{ForwardState, Gradients, RenderedImage};

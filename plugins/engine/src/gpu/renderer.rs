@@ -2,10 +2,10 @@
 
 use super::GpuContext;
 use super::batch::{Batch, ParamBuffers};
-use super::buffers::GpuBuffer;
 use super::kernel::{Kernel, shader};
 use super::scan::PrefixSum;
 use super::sort::{RadixSort, SortBuffers};
+use super::state::{ForwardState, Gradients};
 use crate::EngineError;
 use crate::types::sh_coeffs_per_channel;
 
@@ -54,45 +54,6 @@ pub struct Renderer {
     tile_ranges: Kernel,
     rasterize: Kernel,
     rasterize_backward: Kernel,
-}
-
-/// Outputs of a forward pass plus what its backward replays. Pixels are `[image][y][x]`.
-#[derive(Debug)]
-pub struct ForwardState {
-    /// Colour (background composited) in rgb and alpha = 1 − final transmittance in w.
-    pub rgba: GpuBuffer,
-    /// Σ wᵢ·zᵢ over composited Gaussians (camera z); divide by alpha for the mean depth.
-    pub depth: GpuBuffer,
-    final_t: GpuBuffer,
-    last: GpuBuffer,
-    /// Per Gaussian, three vec4: (mean2d, camera z, opacity), (conic xx, xy, yy, radius in
-    /// pixels), (rgb, 0). All zero for culled Gaussians, so radius > 0 marks visibility
-    /// (what densification's max-radius statistic needs).
-    pub projected: GpuBuffer,
-    ranges: GpuBuffer,
-    tile_values: GpuBuffer,
-    /// (tile, Gaussian) pairs this pass composited from.
-    pub num_intersections: u32,
-}
-
-/// Output of `Renderer::backward`.
-#[derive(Debug)]
-pub struct Gradients {
-    /// Gradients of every parameter, laid out like the batch's parameters.
-    pub params: ParamBuffers,
-    /// Screen-space gradients per Gaussian, 10 floats each: mean2d (2), conic (3), colour (3),
-    /// opacity, depth. ‖mean2d‖ is the statistic 3DGS-style densification accumulates.
-    pub v_projected: GpuBuffer,
-}
-
-/// One image read back to the CPU, row-major.
-#[derive(Clone, Debug, PartialEq)]
-pub struct RenderedImage {
-    pub width: u32,
-    pub height: u32,
-    pub color: Vec<[f32; 3]>,
-    pub alpha: Vec<f32>,
-    pub depth: Vec<f32>,
 }
 
 fn groups(n: u32) -> u32 {
@@ -377,32 +338,5 @@ impl Renderer {
             params: grads,
             v_projected: v_proj,
         }
-    }
-}
-
-impl ForwardState {
-    /// Reads every image of the batch back to the CPU.
-    pub fn read_images(
-        &self,
-        ctx: &GpuContext,
-        batch: &Batch,
-    ) -> Result<Vec<RenderedImage>, EngineError> {
-        let (w, h) = (batch.width(), batch.height());
-        let per = (w * h) as usize;
-        let total = per * batch.images.len();
-        let rgba: Vec<[f32; 4]> = ctx.read(&self.rgba, total)?;
-        let depth: Vec<f32> = ctx.read(&self.depth, total)?;
-        Ok((0..batch.images.len())
-            .map(|i| {
-                let px = &rgba[i * per..(i + 1) * per];
-                RenderedImage {
-                    width: w,
-                    height: h,
-                    color: px.iter().map(|p| [p[0], p[1], p[2]]).collect(),
-                    alpha: px.iter().map(|p| p[3]).collect(),
-                    depth: depth[i * per..(i + 1) * per].to_vec(),
-                }
-            })
-            .collect())
     }
 }
