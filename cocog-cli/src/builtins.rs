@@ -5,13 +5,6 @@ use cocog_pipeline::Registry;
 /// Stages that will exist but are not built yet, with what brings them: `cocog` names
 /// them in its error instead of a bare "unknown stage".
 pub const PLANNED: &[(&str, &str)] = &[
-    ("ingest-colmap", "the format toolkit (issue #3)"),
-    ("ingest-llff", "the format toolkit (issue #3)"),
-    ("ingest-nerf", "the format toolkit (issue #3)"),
-    ("densify", "the format toolkit (issue #3)"),
-    ("prune", "the format toolkit (issue #3)"),
-    ("export", "the format toolkit (issue #3)"),
-    ("convert", "the format toolkit (issue #3)"),
     (
         "eval-scene",
         "the GPU engine (issue #5): it renders the scene first",
@@ -26,5 +19,10 @@ pub fn planned(name: &str) -> Option<&'static str> {
 }
 
 pub fn register(registry: &mut Registry) {
+    registry.add_builtins(cocog_ingest::stages());
+    registry.add_builtins(cocog_densify::stages());
+    registry.add_builtins(cocog_prune::stages());
+    registry.add_builtins(cocog_export::stages());
+    registry.add_builtins(cocog_convert::stages());
     registry.add_builtins(cocog_eval::stages());
 }

@@ -59,7 +59,7 @@ pub enum Command {
     /// Train Gaussians: CoCoGaussian on defocused photos, or plain 3DGS.
     Train(TrainArgs),
     /// Remove Gaussians whose depth-weighted opacity is too low.
-    Prune(SceneToScene),
+    Prune(PruneArgs),
     /// Write the trained Gaussians to a file other tools open (PLY, glTF).
     Export(ExportArgs),
     /// Render the scene's views to PNG (sharp, or refocused with a chosen lens).
@@ -128,6 +128,21 @@ pub struct DensifyArgs {
     /// Random seed for the candidate points.
     #[arg(long)]
     pub seed: Option<u64>,
+    /// Drop candidates with no input point within this distance (scene units).
+    #[arg(long = "max-distance")]
+    pub max_distance: Option<f64>,
+}
+
+#[derive(Args)]
+pub struct PruneArgs {
+    #[command(flatten)]
+    pub io: SceneToScene,
+    /// Depth-weighted opacity below which a Gaussian is removed.
+    #[arg(long)]
+    pub threshold: Option<f64>,
+    /// Depth range factor of the weighting (Deblurring-3DGS).
+    #[arg(long)]
+    pub range: Option<f64>,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -163,10 +178,8 @@ pub struct TrainArgs {
 pub enum ExportFormat {
     /// INRIA 3DGS PLY: opens in SuperSplat, Spark, Brush, three.js, Babylon.js.
     Ply,
-    /// glTF binary with KHR_gaussian_splatting.
+    /// glTF binary with KHR_gaussian_splatting (three.js, Babylon.js).
     Glb,
-    /// Niantic SPZ.
-    Spz,
 }
 
 #[derive(Args)]
@@ -210,6 +223,20 @@ pub struct EvalArgs {
     /// Where to write metrics.json. Default: metrics.json inside the --pred folder.
     #[arg(short, long)]
     pub output: Option<PathBuf>,
+    /// LPIPS: auto (when weights are installed), require, or off. Install the weights once
+    /// with scripts/lpips/fetch-weights.sh.
+    #[arg(long)]
+    pub lpips: Option<String>,
+    /// Also compute LPIPS with the VGG-16 backbone (AlexNet is the papers' choice).
+    #[arg(long)]
+    pub vgg: bool,
+    /// Folder holding alex.safetensors / vgg.safetensors (default: COCOG_LPIPS_WEIGHTS,
+    /// else the user cache dir).
+    #[arg(long = "lpips-weights")]
+    pub lpips_weights: Option<PathBuf>,
+    /// Worker threads; 0 uses every core.
+    #[arg(long)]
+    pub threads: Option<u64>,
 }
 
 #[derive(Clone, Copy, ValueEnum)]

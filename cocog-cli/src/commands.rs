@@ -65,7 +65,9 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
             run(name, &a.dataset, &a.output, o)
         }
         Command::Densify(a) => {
-            let o = options! { "points" => a.points, "seed" => a.seed };
+            let o = options! {
+                "points" => a.points, "seed" => a.seed, "max-distance" => a.max_distance,
+            };
             run("densify", &a.io.scene, &a.io.output, o)
         }
         Command::Train(a) => {
@@ -79,12 +81,14 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
             };
             run("train", &a.io.scene, &a.io.output, o)
         }
-        Command::Prune(a) => run("prune", &a.scene, &a.output, Map::new()),
+        Command::Prune(a) => {
+            let o = options! { "threshold" => a.threshold, "range" => a.range };
+            run("prune", &a.io.scene, &a.io.output, o)
+        }
         Command::Export(a) => {
             let format = match a.format {
                 ExportFormat::Ply => "ply",
                 ExportFormat::Glb => "glb",
-                ExportFormat::Spz => "spz",
             };
             run(
                 "export",
@@ -193,11 +197,18 @@ fn eval(
                 .output
                 .clone()
                 .unwrap_or_else(|| pred.join("metrics.json"));
-            let o = options! { "gt" => Some(gt.display().to_string()) };
+            let o = options! {
+                "gt" => Some(gt.display().to_string()), "lpips" => a.lpips.clone(),
+                "vgg" => a.vgg.then_some(true), "threads" => a.threads,
+                "lpips_weights" => a.lpips_weights.as_ref().map(|p| p.display().to_string()),
+            };
             // Re-scoring a folder replaces its own default metrics file.
             let force = g.force || a.output.is_none();
             let entry = resolve(registry, "eval")?;
             let summary = run_stage(entry, pred, &output, &o, force, ctx)?;
+            if !g.quiet {
+                eprint!("{}", cocog_eval::format_table(&summary));
+            }
             print_result(g, &summary, &output)
         }
         (Some(scene), None, _) => {

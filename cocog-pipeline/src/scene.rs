@@ -67,7 +67,8 @@ pub struct Lens {
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct View {
-    /// Stable name, the image's file stem; `render` names its output after it.
+    /// Stable name and sort key: the image name as the dataset lists it (e.g. `000.png`);
+    /// `render` names its PNG after this name's stem.
     pub name: String,
     pub image: String,
     pub camera: u32,

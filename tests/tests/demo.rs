@@ -1,0 +1,37 @@
+//! `cocog demo` runs the chain on its generated dataset, as the README promises.
+
+use cocog_tests::{cocog, listing, path_str, stderr, stdout};
+
+#[test]
+fn demo_generates_its_dataset_and_runs_the_available_stages() {
+    let work = tempfile::tempdir().expect("tempdir");
+    let root = work.path().join("demo");
+    let out = cocog(&["demo", "-o", path_str(&root)]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let names = listing(&root);
+    for expected in ["1-ingest", "2-densify", "dataset"] {
+        assert!(names.contains(&expected.to_owned()), "{names:?}");
+    }
+    assert_eq!(listing(&root.join("dataset/images")).len(), 16);
+    // Stdout is the last output that was produced.
+    let last = stdout(&out);
+    assert!(
+        std::path::Path::new(last.trim())
+            .join("scene.json")
+            .exists(),
+        "{last}"
+    );
+    // A rerun replaces the demo's own directory without --force...
+    let again = cocog(&["demo", "-o", path_str(&root)]);
+    assert!(again.status.success(), "{}", stderr(&again));
+    // ...but never a directory it did not make.
+    let foreign = work.path().join("mine");
+    std::fs::create_dir(&foreign).expect("mkdir");
+    let refused = cocog(&["demo", "-o", path_str(&foreign)]);
+    assert_eq!(refused.status.code(), Some(1));
+    assert!(
+        stderr(&refused).contains("not a cocog demo directory"),
+        "{}",
+        stderr(&refused)
+    );
+}

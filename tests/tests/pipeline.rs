@@ -1,0 +1,109 @@
+//! `cocog run`: a pipeline file chaining a built-in stage and a plugin stage.
+
+use cocog_synth::{SynthConfig, write_defocus_dataset};
+use cocog_tests::{cdylib, cocog, listing, path_str, stderr};
+use serde_json::Value;
+
+fn read_scene(dir: &std::path::Path) -> Value {
+    let text = std::fs::read_to_string(dir.join("scene.json")).expect("scene.json");
+    serde_json::from_str(&text).expect("json")
+}
+
+#[test]
+fn run_chains_ingest_and_a_plugin_stage() {
+    let work = tempfile::tempdir().expect("tempdir");
+    write_defocus_dataset(&work.path().join("dataset"), &SynthConfig::tiny(3)).expect("synth");
+    let pipeline = work.path().join("pipeline.toml");
+    std::fs::write(
+        &pipeline,
+        "[pipeline]\ninput = \"dataset\"\noutput = \"runs/final\"\n\
+         stages = [\"ingest-colmap\", \"recenter\"]\n\n[recenter]\nradius = 1.5\n",
+    )
+    .expect("write pipeline");
+    let lib = cdylib("cocog-plugin-recenter");
+    let out = cocog(&["run", path_str(&pipeline), "--plugin-path", path_str(&lib)]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.trim_end().ends_with("runs/final"), "{stdout}");
+
+    let runs = work.path().join("runs");
+    assert_eq!(listing(&runs), vec!["final", "final.stages"]);
+    assert_eq!(
+        listing(&runs.join("final.stages")),
+        vec!["01-ingest-colmap"]
+    );
+    let ingested = read_scene(&runs.join("final.stages/01-ingest-colmap"));
+    let scene = read_scene(&runs.join("final"));
+    let history: Vec<&str> = scene["history"]
+        .as_array()
+        .expect("history")
+        .iter()
+        .map(|h| h["stage"].as_str().expect("stage"))
+        .collect();
+    assert_eq!(history, vec!["ingest-colmap", "recenter"]);
+    assert_eq!(scene["views"].as_array().map(Vec::len), Some(10));
+    // Same views in the same order, same rotations; only the camera centres moved.
+    let pairs = scene["views"]
+        .as_array()
+        .expect("views")
+        .iter()
+        .zip(ingested["views"].as_array().expect("views"));
+    for (a, b) in pairs {
+        for key in ["name", "image", "split", "camera"] {
+            assert_eq!(a[key], b[key], "{key}");
+        }
+        for r in 0..3 {
+            for c in 0..3 {
+                assert_eq!(a["world_from_camera"][r][c], b["world_from_camera"][r][c]);
+            }
+        }
+    }
+    let far = scene["views"]
+        .as_array()
+        .expect("views")
+        .iter()
+        .map(|v| {
+            let m = &v["world_from_camera"];
+            (0..3)
+                .map(|r| m[r][3].as_f64().expect("t").powi(2))
+                .sum::<f64>()
+                .sqrt()
+        })
+        .fold(0.0, f64::max);
+    assert!((far - 1.5).abs() < 1e-9, "farthest camera at {far}");
+}
+
+#[test]
+fn pipeline_mistakes_fail_before_any_stage_runs() {
+    let work = tempfile::tempdir().expect("tempdir");
+    std::fs::create_dir(work.path().join("dataset")).expect("mkdir");
+    let pipeline = work.path().join("p.toml");
+
+    std::fs::write(
+        &pipeline,
+        "[pipeline]\ninput = \"dataset\"\noutput = \"out\"\nstages = [\"ingest-colmap\", \"no-such-stage\"]\n",
+    )
+    .expect("write");
+    let out = cocog(&["run", path_str(&pipeline)]);
+    assert_eq!(out.status.code(), Some(3), "{}", stderr(&out));
+    assert!(stderr(&out).contains("no-such-stage"), "{}", stderr(&out));
+
+    std::fs::write(
+        &pipeline,
+        "[pipeline]\ninput = \"dataset\"\noutput = \"out\"\nstages = [\"ingest-colmap\"]\n[densfy]\npoints = 1\n",
+    )
+    .expect("write");
+    let out = cocog(&["run", path_str(&pipeline)]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        stderr(&out).contains("p.toml") && stderr(&out).contains("[densfy]"),
+        "{}",
+        stderr(&out)
+    );
+
+    std::fs::write(&pipeline, "[pipeline]\ninput = 3\n").expect("write");
+    let out = cocog(&["run", path_str(&pipeline)]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr(&out).contains("p.toml"), "{}", stderr(&out));
+    assert_eq!(listing(work.path()), vec!["dataset", "p.toml"]);
+}
