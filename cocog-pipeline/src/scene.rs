@@ -186,6 +186,23 @@ impl Scene {
         }
     }
 
+    /// Makes every relative path in the manifest absolute against `dir` (the scene's own
+    /// directory), so the scene stays valid when a stage writes it somewhere else.
+    pub fn rebase(&mut self, dir: &Path) -> Result<(), SceneError> {
+        let dir = dir.canonicalize().map_err(|source| SceneError::Io {
+            path: dir.to_path_buf(),
+            source,
+        })?;
+        let abs = |p: &mut String| *p = Self::resolve(&dir, p).display().to_string();
+        for v in &mut self.views {
+            abs(&mut v.image);
+            v.depth.as_mut().map(abs);
+        }
+        self.points.as_mut().map(abs);
+        self.gaussians.as_mut().map(abs);
+        Ok(())
+    }
+
     pub fn camera(&self, id: u32) -> Option<&Camera> {
         self.cameras.iter().find(|c| c.id == id)
     }

@@ -114,3 +114,22 @@ fn resolve_keeps_absolute_and_joins_relative() {
         PathBuf::from("/scenes/a/points.ply")
     );
 }
+
+#[test]
+fn rebase_makes_relative_paths_absolute() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut s = sample();
+    s.views[0].image = "images/000.png".into();
+    s.points = Some("points.ply".into());
+    s.rebase(dir.path()).expect("rebase");
+    let root = dir.path().canonicalize().expect("canonical");
+    assert_eq!(
+        PathBuf::from(&s.views[0].image),
+        root.join("images/000.png")
+    );
+    assert_eq!(
+        s.points.as_deref().map(PathBuf::from),
+        Some(root.join("points.ply"))
+    );
+    assert!(s.rebase(&dir.path().join("missing")).is_err());
+}

@@ -8,8 +8,6 @@
 
 mod extra;
 
-use std::path::Path;
-
 use cocog_formats::ply::{read_points, write_points};
 use cocog_pipeline::{
     Context, OptionSpec, OutputKind, Scene, Stage, StageError, StageInfo, StageKind, StageRequest,
@@ -19,19 +17,6 @@ use serde_json::{Value, json};
 pub use extra::{Extra, SplitMix64, extra_points, robust_box};
 
 pub struct Densify;
-
-/// Makes every relative path in `scene` absolute against `input`, so the scene stays valid
-/// when written to a new directory.
-fn rebase(scene: &mut Scene, input: &Path) -> Result<(), StageError> {
-    let input = input.canonicalize().map_err(|e| StageError::io(input, e))?;
-    let abs = |p: &str| Scene::resolve(&input, p).display().to_string();
-    for v in &mut scene.views {
-        v.image = abs(&v.image);
-        v.depth = v.depth.as_deref().map(abs);
-    }
-    scene.gaussians = scene.gaussians.as_deref().map(abs);
-    Ok(())
-}
 
 impl Stage for Densify {
     fn info(&self) -> StageInfo {
@@ -83,7 +68,7 @@ impl Stage for Densify {
         let added = extra.points.len();
         cloud.positions.extend(&extra.points.positions);
         cloud.colors.extend(&extra.points.colors);
-        rebase(&mut scene, &req.input)?;
+        scene.rebase(&req.input)?;
         write_points(&req.output.join("points.ply"), &cloud)
             .map_err(|e| StageError::Input(e.to_string()))?;
         scene.points = Some("points.ply".to_owned());

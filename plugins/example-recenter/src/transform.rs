@@ -67,8 +67,8 @@ impl Similarity {
     }
 }
 
-/// Writes transformed copies of the scene's point cloud and Gaussians into `out`, and
-/// makes every other path absolute so the new scene still finds its images.
+/// Makes the scene's paths absolute (so the new scene still finds its images) and writes
+/// transformed copies of its point cloud and Gaussians into `out`.
 pub fn carry_files(
     scene: &mut Scene,
     input: &Path,
@@ -88,7 +88,7 @@ pub fn carry_files(
         ctx.info(&format!("recenter: moved {} points", cloud.len()));
     }
     if let Some(stored) = scene.gaussians.clone() {
-        let mut g = read_splats(&Scene::resolve(&input, &stored)).map_err(StageError::other)?;
+        let mut g = read_splats(Path::new(&stored)).map_err(StageError::other)?;
         for p in g.means.chunks_exact_mut(3) {
             let q = sim.point([p[0], p[1], p[2]].map(f64::from));
             p.copy_from_slice(&q.map(|v| v as f32));
@@ -102,7 +102,6 @@ pub fn carry_files(
         ctx.info(&format!("recenter: moved {} Gaussians", g.len()));
     }
     for v in &mut scene.views {
-        v.image = Scene::resolve(&input, &v.image).display().to_string();
         if v.depth.take().is_some() {
             // Depth maps hold distances in the old units; rather than point at maps
             // that are now wrong by a factor, drop them (render can regenerate depth).

@@ -7,8 +7,6 @@
 
 mod depth_prune;
 
-use std::path::Path;
-
 use cocog_formats::ply::{read_splats, write_splats};
 use cocog_pipeline::{
     Context, OptionSpec, OutputKind, Scene, Stage, StageError, StageInfo, StageKind, StageRequest,
@@ -18,19 +16,6 @@ use serde_json::{Value, json};
 pub use depth_prune::{keep_mask, retain};
 
 pub struct Prune;
-
-/// Makes every relative path in `scene` absolute against `input`, so the scene stays valid
-/// when written to a new directory.
-fn rebase(scene: &mut Scene, input: &Path) -> Result<(), StageError> {
-    let input = input.canonicalize().map_err(|e| StageError::io(input, e))?;
-    let abs = |p: &str| Scene::resolve(&input, p).display().to_string();
-    for v in &mut scene.views {
-        v.image = abs(&v.image);
-        v.depth = v.depth.as_deref().map(abs);
-    }
-    scene.points = scene.points.as_deref().map(abs);
-    Ok(())
-}
 
 impl Stage for Prune {
     fn info(&self) -> StageInfo {
@@ -82,7 +67,7 @@ impl Stage for Prune {
             "prune: kept {} of {before} Gaussians",
             splats.len()
         ));
-        rebase(&mut scene, &req.input)?;
+        scene.rebase(&req.input)?;
         write_splats(&req.output.join("gaussians.ply"), &splats, None)
             .map_err(|e| StageError::Input(e.to_string()))?;
         scene.gaussians = Some("gaussians.ply".to_owned());
