@@ -1,0 +1,24 @@
+//! cocog-train: the vanilla 3DGS training loop (INRIA 2023) on the cocog GPU engine.
+//!
+//! `init_from_points` turns a point cloud into Gaussians by the INRIA rule, `scene_extent`
+//! gives the scale the position learning rate is relative to, and `Trainer` runs
+//! forward → (1 − λ)·L1 + λ·D-SSIM → backward → per-group Adam, one view per iteration in a
+//! seeded order, raising the SH degree every `sh_degree_interval` iterations. Everything but
+//! the occasional loss readback and the SH growth stays on the GPU.
+//!
+//! Determinism: the initialisation and the view order depend only on the inputs and the seed.
+//! The GPU backward accumulates gradients with float atomics, whose summation order varies,
+//! so parameters agree between runs only to rounding.
+
+mod config;
+mod error;
+mod init;
+mod order;
+mod sh_adam;
+mod trainer;
+
+pub use config::TrainConfig;
+pub use error::TrainError;
+pub use init::{SH_C0, init_from_points, inverse_sigmoid, rgb_to_sh, scene_extent};
+pub use order::{SplitMix64, ViewOrder};
+pub use trainer::{StepStats, TrainView, Trainer};

@@ -1,0 +1,338 @@
+//! The training loop: one view per iteration, forward → loss → backward → per-group Adam.
+
+use cocog_engine::{
+    Adam, AdamConfig, AdamMoments, Batch, Camera, GaussianParams, GpuBuffer, GpuContext, ImageLoss,
+    ImageSpec, MAX_SH_DEGREE, ParamBuffers, RenderedImage, Renderer, sh_coeffs_per_channel,
+};
+
+use crate::sh_adam::ShAdam;
+use crate::{TrainConfig, TrainError, ViewOrder, scene_extent};
+
+/// One training image: its camera and its linear RGB pixels, row-major, `width × height`.
+#[derive(Clone, Debug)]
+pub struct TrainView {
+    pub camera: Camera,
+    pub image: Vec<[f32; 3]>,
+}
+
+/// What one iteration did.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StepStats {
+    /// 1-based, as INRIA counts (schedules are evaluated at this value).
+    pub iteration: u32,
+    pub view: usize,
+    pub sh_degree: u32,
+    /// Only on iterations divisible by `TrainConfig::loss_every` (reading it syncs the GPU).
+    pub loss: Option<f64>,
+}
+
+/// Adam state of each parameter group.
+#[derive(Debug)]
+struct Moments {
+    means: AdamMoments,
+    log_scales: AdamMoments,
+    quats: AdamMoments,
+    opacity_logits: AdamMoments,
+    sh: AdamMoments,
+}
+
+impl Moments {
+    fn new(ctx: &GpuContext, p: &ParamBuffers) -> Self {
+        let n = p.num_gaussians;
+        let sh = 3 * sh_coeffs_per_channel(p.sh_degree) as u32;
+        Self {
+            means: AdamMoments::new(ctx, 3 * n),
+            log_scales: AdamMoments::new(ctx, 3 * n),
+            quats: AdamMoments::new(ctx, 4 * n),
+            opacity_logits: AdamMoments::new(ctx, n),
+            sh: AdamMoments::new(ctx, sh * n),
+        }
+    }
+}
+
+/// Vanilla 3DGS optimisation of one Gaussian set against posed images, all on the GPU.
+pub struct Trainer<'c> {
+    ctx: &'c GpuContext,
+    config: TrainConfig,
+    renderer: Renderer,
+    loss: ImageLoss,
+    adam: Adam,
+    sh_adam: ShAdam,
+    cameras: Vec<Camera>,
+    /// Per view, rgba f32 laid out like `ForwardState::rgba` (alpha unused by the loss).
+    targets: Vec<GpuBuffer>,
+    /// The loss has no depth term; the backward still wants a (zero) depth gradient.
+    v_depth: GpuBuffer,
+    /// `None` only after a step failed between taking and returning them (see `Poisoned`).
+    params: Option<ParamBuffers>,
+    moments: Moments,
+    order: ViewOrder,
+    extent: f64,
+    iteration: u32,
+}
+
+impl<'c> Trainer<'c> {
+    /// Uploads `init` and the target images. All views must share one resolution (the engine
+    /// batches by resolution); the scene extent comes from their camera centres.
+    pub fn new(
+        ctx: &'c GpuContext,
+        init: &GaussianParams,
+        views: &[TrainView],
+        config: TrainConfig,
+    ) -> Result<Self, TrainError> {
+        let first = views
+            .first()
+            .ok_or_else(|| TrainError::Invalid("no training views".into()))?;
+        let (w, h) = (first.camera.width, first.camera.height);
+        for (i, v) in views.iter().enumerate() {
+            if (v.camera.width, v.camera.height) != (w, h) {
+                return Err(TrainError::Invalid(format!(
+                    "view {i} is {}×{}, view 0 is {w}×{h}",
+                    v.camera.width, v.camera.height
+                )));
+            }
+            if v.image.len() != (w * h) as usize {
+                return Err(TrainError::Invalid(format!(
+                    "view {i} has {} pixels, its camera {}",
+                    v.image.len(),
+                    w * h
+                )));
+            }
+        }
+        if config.max_sh_degree > MAX_SH_DEGREE || init.sh_degree > config.max_sh_degree {
+            return Err(TrainError::Invalid(format!(
+                "SH degree {} / max {} (engine max {MAX_SH_DEGREE})",
+                init.sh_degree, config.max_sh_degree
+            )));
+        }
+        if init.is_empty() {
+            return Err(TrainError::Invalid("no Gaussians to train".into()));
+        }
+        let cameras: Vec<Camera> = views.iter().map(|v| v.camera).collect();
+        let extent = scene_extent(&cameras)?;
+        let params = ParamBuffers::upload(ctx, &[init])?;
+        let targets = views
+            .iter()
+            .map(|v| {
+                let rgba: Vec<[f32; 4]> = v.image.iter().map(|c| [c[0], c[1], c[2], 1.0]).collect();
+                ctx.storage_from("target", &rgba)
+            })
+            .collect();
+        Ok(Self {
+            ctx,
+            renderer: Renderer::new(ctx),
+            loss: ImageLoss::new(ctx),
+            adam: Adam::new(ctx),
+            sh_adam: ShAdam::new(ctx),
+            targets,
+            v_depth: ctx.storage("v_depth", u64::from(w * h) * 4),
+            moments: Moments::new(ctx, &params),
+            params: Some(params),
+            order: ViewOrder::new(views.len(), config.seed),
+            cameras,
+            extent,
+            iteration: 0,
+            config,
+        })
+    }
+
+    pub fn config(&self) -> &TrainConfig {
+        &self.config
+    }
+
+    /// Scene extent (INRIA radius) the position learning rate is scaled by.
+    pub fn extent(&self) -> f64 {
+        self.extent
+    }
+
+    /// Iterations completed.
+    pub fn iteration(&self) -> u32 {
+        self.iteration
+    }
+
+    pub fn sh_degree(&self) -> u32 {
+        self.params.as_ref().map_or(0, |p| p.sh_degree)
+    }
+
+    pub fn num_gaussians(&self) -> u32 {
+        self.params.as_ref().map_or(0, |p| p.num_gaussians)
+    }
+
+    /// One iteration: raise the SH degree if due, pick the next view, optimise on it.
+    pub fn step(&mut self) -> Result<StepStats, TrainError> {
+        let it = self.iteration + 1;
+        let degree = self.config.sh_degree_at(it);
+        if degree > self.sh_degree() {
+            self.raise_sh_degree(degree)?;
+        }
+        let view = self
+            .order
+            .next_view()
+            .ok_or_else(|| TrainError::Invalid("no training views".into()))?;
+        let batch = self.batch_for(self.cameras[view])?;
+        let result = self.optimise(&batch, view, it);
+        self.params = Some(batch.params);
+        let loss = result?;
+        self.iteration = it;
+        Ok(StepStats {
+            iteration: it,
+            view,
+            sh_degree: self.sh_degree(),
+            loss,
+        })
+    }
+
+    /// Renders the current Gaussians from `camera` over the configured background.
+    pub fn render(&mut self, camera: &Camera) -> Result<RenderedImage, TrainError> {
+        let batch = self.batch_for(*camera)?;
+        let result = self
+            .renderer
+            .forward(self.ctx, &batch)
+            .and_then(|state| state.read_images(self.ctx, &batch));
+        self.params = Some(batch.params);
+        let mut images = result?;
+        images
+            .pop()
+            .ok_or_else(|| TrainError::Invalid("renderer returned no image".into()))
+    }
+
+    /// Reads the current Gaussians back to the CPU (one sync per parameter buffer).
+    pub fn gaussians(&self) -> Result<GaussianParams, TrainError> {
+        let p = self.params.as_ref().ok_or(TrainError::Poisoned)?;
+        // The gradient readback reads any buffers shaped like the parameters.
+        let g = p.read_grads(self.ctx, 0, p.num_gaussians)?;
+        Ok(GaussianParams {
+            sh_degree: p.sh_degree,
+            means: g.v_means,
+            log_scales: g.v_log_scales,
+            quats: g.v_quats,
+            opacity_logits: g.v_opacity_logits,
+            sh: g.v_sh,
+        })
+    }
+
+    /// A single-image batch over the parameters. `Batch::new` takes them by value, so they
+    /// leave `self` until the caller puts `batch.params` back.
+    fn batch_for(&mut self, camera: Camera) -> Result<Batch, TrainError> {
+        let params = self.params.take().ok_or(TrainError::Poisoned)?;
+        let spec = ImageSpec {
+            camera,
+            background: self.config.background,
+            first: 0,
+            count: params.num_gaussians,
+        };
+        Ok(Batch::new(self.ctx, params, vec![spec])?)
+    }
+
+    fn optimise(&self, batch: &Batch, view: usize, it: u32) -> Result<Option<f64>, TrainError> {
+        let ctx = self.ctx;
+        let c = &self.config;
+        let state = self.renderer.forward(ctx, batch)?;
+        let (w, h) = (batch.width(), batch.height());
+        let out = self.loss.compute(
+            ctx,
+            &state.rgba,
+            &self.targets[view],
+            w,
+            h,
+            1,
+            c.lambda_dssim,
+        );
+        let loss = if c.loss_every > 0 && it.is_multiple_of(c.loss_every) {
+            Some(out.read_loss(ctx)?)
+        } else {
+            None
+        };
+        let grads = self
+            .renderer
+            .backward(ctx, batch, &state, &out.v_pred, &self.v_depth);
+        let (p, g, m) = (&batch.params, &grads.params, &self.moments);
+        let lr = AdamConfig::with_lr;
+        let mut enc = ctx.device.create_command_encoder(&Default::default());
+        let groups = [
+            (&p.means, &g.means, &m.means, c.position_lr(it, self.extent)),
+            (&p.log_scales, &g.log_scales, &m.log_scales, c.scaling_lr),
+            (&p.quats, &g.quats, &m.quats, c.rotation_lr),
+            (
+                &p.opacity_logits,
+                &g.opacity_logits,
+                &m.opacity_logits,
+                c.opacity_lr,
+            ),
+        ];
+        for (param, grad, moments, rate) in groups {
+            self.adam
+                .encode(ctx, &mut enc, param, grad, moments, &lr(rate), it);
+        }
+        let coeffs = sh_coeffs_per_channel(p.sh_degree) as u32;
+        self.sh_adam.encode(
+            ctx,
+            &mut enc,
+            &p.sh,
+            &g.sh,
+            &m.sh,
+            coeffs,
+            &lr(c.feature_lr),
+            c.feature_rest_lr(),
+            it,
+        );
+        ctx.queue.submit([enc.finish()]);
+        Ok(loss)
+    }
+
+    /// Re-lays the SH buffer and its Adam moments out for `degree`, new coefficients zero.
+    /// INRIA allocates degree 3 up front and masks; the result is the same because masked
+    /// coefficients get zero gradients, so their parameters and moments stay zero until used.
+    fn raise_sh_degree(&mut self, degree: u32) -> Result<(), TrainError> {
+        let ctx = self.ctx;
+        let params = self.params.as_mut().ok_or(TrainError::Poisoned)?;
+        let n = params.num_gaussians as usize;
+        let (old_k, new_k) = (
+            sh_coeffs_per_channel(params.sh_degree),
+            sh_coeffs_per_channel(degree),
+        );
+        let widen = |buf: &wgpu::Buffer, label: &str| -> Result<GpuBuffer, TrainError> {
+            let old: Vec<f32> = ctx.read(buf, n * 3 * old_k)?;
+            Ok(ctx.storage_from(label, &widen_sh(&old, old_k, new_k)))
+        };
+        let sh = widen(&params.sh, "sh")?;
+        let moments = AdamMoments {
+            m: widen(&self.moments.sh.m, "adam m")?,
+            v: widen(&self.moments.sh.v, "adam v")?,
+            len: (n * 3 * new_k) as u32,
+        };
+        params.sh = sh;
+        params.sh_degree = degree;
+        self.moments.sh = moments;
+        Ok(())
+    }
+}
+
+/// Copies per-channel SH blocks of `old_k` coefficients into blocks of `new_k`, zero-filled.
+pub(crate) fn widen_sh(old: &[f32], old_k: usize, new_k: usize) -> Vec<f32> {
+    let mut out = vec![0.0; old.len() / old_k * new_k];
+    for (src, dst) in old.chunks_exact(old_k).zip(out.chunks_exact_mut(new_k)) {
+        dst[..old_k].copy_from_slice(src);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::widen_sh;
+
+    #[test]
+    fn widening_keeps_each_channel_block_in_place() {
+        // Two Gaussians × 3 channels at degree 0 (1 coefficient) → degree 1 (4).
+        let old = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0];
+        let new = widen_sh(&old, 1, 4);
+        assert_eq!(new.len(), 24);
+        for (i, v) in old.iter().enumerate() {
+            assert_eq!(new[4 * i], *v);
+            assert_eq!(&new[4 * i + 1..4 * i + 4], &[0.0; 3]);
+        }
+        let again = widen_sh(&new, 4, 9);
+        assert_eq!(again[9 * 5], 6.0);
+        assert_eq!(again.len(), 54);
+    }
+}
