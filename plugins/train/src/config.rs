@@ -1,5 +1,7 @@
 //! Hyper-parameters of the vanilla 3DGS optimisation (INRIA 2023 defaults).
 
+use crate::DensifyConfig;
+
 /// Learning rates and schedules. Defaults are the INRIA `OptimizationParams` of the 2023
 /// release (method.md §7), which CoCoGaussian inherits.
 #[derive(Clone, Debug, PartialEq)]
@@ -24,6 +26,8 @@ pub struct TrainConfig {
     pub seed: u64,
     /// Read the loss back (one GPU→CPU sync) every this many iterations; 0 never.
     pub loss_every: u32,
+    /// Adaptive density control; `None` trains a fixed set of Gaussians.
+    pub densify: Option<DensifyConfig>,
 }
 
 impl Default for TrainConfig {
@@ -42,6 +46,7 @@ impl Default for TrainConfig {
             background: [0.0; 3],
             seed: 0,
             loss_every: 100,
+            densify: Some(DensifyConfig::default()),
         }
     }
 }

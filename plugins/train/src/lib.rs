@@ -4,21 +4,27 @@
 //! gives the scale the position learning rate is relative to, and `Trainer` runs
 //! forward → (1 − λ)·L1 + λ·D-SSIM → backward → per-group Adam, one view per iteration in a
 //! seeded order, raising the SH degree every `sh_degree_interval` iterations. Everything but
-//! the occasional loss readback and the SH growth stays on the GPU.
+//! the occasional loss readback, the SH growth and the densification decision (made on the
+//! CPU from statistics accumulated on the GPU, every 100 iterations) stays on the GPU.
 //!
 //! Determinism: the initialisation and the view order depend only on the inputs and the seed.
 //! The GPU backward accumulates gradients with float atomics, whose summation order varies,
 //! so parameters agree between runs only to rounding.
 
 mod config;
+mod densify;
 mod error;
 mod init;
+mod kernel;
 mod order;
 mod sh_adam;
+mod stats;
 mod trainer;
 
 pub use config::TrainConfig;
+pub use densify::{DensifyConfig, DensifyPlan, Origin, apply_plan, gather_rows, plan_densify};
 pub use error::TrainError;
 pub use init::{SH_C0, init_from_points, inverse_sigmoid, rgb_to_sh, scene_extent};
 pub use order::{SplitMix64, ViewOrder};
+pub use stats::GradStats;
 pub use trainer::{StepStats, TrainView, Trainer};

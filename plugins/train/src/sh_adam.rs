@@ -1,7 +1,8 @@
 //! Adam for the SH buffer with separate DC and higher-order learning rates; see sh_adam.wgsl.
 
 use cocog_engine::{AdamConfig, AdamMoments, GpuContext};
-use wgpu::util::DeviceExt;
+
+use crate::kernel::Kernel;
 
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
@@ -18,33 +19,16 @@ struct Params {
     pad: [u32; 3],
 }
 
-/// Workgroups along x before the grid spills into y (WebGPU's per-dimension limit).
-const MAX_GRID_X: u32 = 65_535;
-
 #[derive(Debug)]
 pub(crate) struct ShAdam {
-    pipeline: wgpu::ComputePipeline,
+    kernel: Kernel,
 }
 
 impl ShAdam {
     pub(crate) fn new(ctx: &GpuContext) -> Self {
-        let module = ctx
-            .device
-            .create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some("sh_adam"),
-                source: wgpu::ShaderSource::Wgsl(include_str!("sh_adam.wgsl").into()),
-            });
-        let pipeline = ctx
-            .device
-            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some("sh_adam"),
-                layout: None,
-                module: &module,
-                entry_point: Some("sh_adam"),
-                compilation_options: Default::default(),
-                cache: None,
-            });
-        Self { pipeline }
+        Self {
+            kernel: Kernel::new(ctx, include_str!("sh_adam.wgsl"), "sh_adam"),
+        }
     }
 
     /// Records step `t` (1-based): DC coefficients move at `config.lr`, the rest at `lr_rest`.
@@ -76,35 +60,8 @@ impl ShAdam {
             bias2: 1.0 - config.beta2.powi(t),
             pad: [0; 3],
         };
-        let uniform = ctx
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("sh_adam params"),
-                contents: bytemuck::bytes_of(&params),
-                usage: wgpu::BufferUsages::UNIFORM,
-            });
-        let buffers: [&wgpu::Buffer; 5] = [&uniform, param, grad, &moments.m, &moments.v];
-        let entries: Vec<_> = buffers
-            .iter()
-            .enumerate()
-            .map(|(i, b)| wgpu::BindGroupEntry {
-                binding: i as u32,
-                resource: b.as_entire_binding(),
-            })
-            .collect();
-        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("sh_adam"),
-            layout: &self.pipeline.get_bind_group_layout(0),
-            entries: &entries,
-        });
-        let groups = moments.len.div_ceil(256);
-        let x = groups.min(MAX_GRID_X);
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("sh_adam"),
-            timestamp_writes: None,
-        });
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &bind_group, &[]);
-        pass.dispatch_workgroups(x, groups.div_ceil(x), 1);
+        let buffers = [param, grad, &moments.m.buffer, &moments.v.buffer];
+        self.kernel
+            .dispatch_1d(ctx, encoder, &params, &buffers, moments.len);
     }
 }

@@ -6,7 +6,9 @@ use cocog_engine::{
 };
 
 use crate::sh_adam::ShAdam;
-use crate::{TrainConfig, TrainError, ViewOrder, scene_extent};
+use crate::{GradStats, SplitMix64, TrainConfig, TrainError, ViewOrder, scene_extent};
+
+mod density;
 
 /// One training image: its camera and its linear RGB pixels, row-major, `width × height`.
 #[derive(Clone, Debug)]
@@ -22,6 +24,8 @@ pub struct StepStats {
     pub iteration: u32,
     pub view: usize,
     pub sh_degree: u32,
+    /// Gaussians after this iteration's densification, if any.
+    pub num_gaussians: u32,
     /// Only on iterations divisible by `TrainConfig::loss_every` (reading it syncs the GPU).
     pub loss: Option<f64>,
 }
@@ -67,6 +71,9 @@ pub struct Trainer<'c> {
     params: Option<ParamBuffers>,
     moments: Moments,
     order: ViewOrder,
+    /// Densification statistics and the split sampler.
+    stats: GradStats,
+    rng: SplitMix64,
     extent: f64,
     iteration: u32,
 }
@@ -127,6 +134,9 @@ impl<'c> Trainer<'c> {
             targets,
             v_depth: ctx.storage("v_depth", u64::from(w * h) * 4),
             moments: Moments::new(ctx, &params),
+            stats: GradStats::new(ctx, params.num_gaussians),
+            // Decorrelated from the view order, which uses the seed as is.
+            rng: SplitMix64::new(config.seed ^ 0xD3A5_17F0_0000_0001),
             params: Some(params),
             order: ViewOrder::new(views.len(), config.seed),
             cameras,
@@ -169,15 +179,28 @@ impl<'c> Trainer<'c> {
             .order
             .next_view()
             .ok_or_else(|| TrainError::Invalid("no training views".into()))?;
+        let d = self.config.densify.clone();
+        let plan = Plan {
+            gather_stats: d.as_ref().is_some_and(|d| it < d.until_iter),
+            densify: d.as_ref().is_some_and(|d| d.densifies_at(it)),
+            reset_opacity: d.as_ref().is_some_and(|d| d.resets_opacity_at(it)),
+        };
         let batch = self.batch_for(self.cameras[view])?;
-        let result = self.optimise(&batch, view, it);
+        let result = self.optimise(&batch, view, it, plan);
         self.params = Some(batch.params);
         let loss = result?;
+        if let Some(d) = d.filter(|_| plan.densify) {
+            self.densify_and_prune(&d, it)?;
+        }
+        if plan.reset_opacity {
+            self.reset_opacity()?;
+        }
         self.iteration = it;
         Ok(StepStats {
             iteration: it,
             view,
             sh_degree: self.sh_degree(),
+            num_gaussians: self.num_gaussians(),
             loss,
         })
     }
@@ -224,7 +247,13 @@ impl<'c> Trainer<'c> {
         Ok(Batch::new(self.ctx, params, vec![spec])?)
     }
 
-    fn optimise(&self, batch: &Batch, view: usize, it: u32) -> Result<Option<f64>, TrainError> {
+    fn optimise(
+        &self,
+        batch: &Batch,
+        view: usize,
+        it: u32,
+        plan: Plan,
+    ) -> Result<Option<f64>, TrainError> {
         let ctx = self.ctx;
         let c = &self.config;
         let state = self.renderer.forward(ctx, batch)?;
@@ -246,6 +275,15 @@ impl<'c> Trainer<'c> {
         let grads = self
             .renderer
             .backward(ctx, batch, &state, &out.v_pred, &self.v_depth);
+        if plan.gather_stats {
+            self.stats.accumulate(ctx, &state, &grads, w, h);
+        }
+        // INRIA densifies before `optimizer.step()`, and the parameters it replaces have no
+        // gradient, so torch skips them: no step at all when densifying, and none for the
+        // opacities when resetting them.
+        if plan.densify {
+            return Ok(loss);
+        }
         let (p, g, m) = (&batch.params, &grads.params, &self.moments);
         let lr = AdamConfig::with_lr;
         let mut enc = ctx.device.create_command_encoder(&Default::default());
@@ -260,7 +298,11 @@ impl<'c> Trainer<'c> {
                 c.opacity_lr,
             ),
         ];
-        for (param, grad, moments, rate) in groups {
+        let skip = if plan.reset_opacity { 3 } else { groups.len() };
+        for (k, (param, grad, moments, rate)) in groups.into_iter().enumerate() {
+            if k == skip {
+                continue;
+            }
             self.adam
                 .encode(ctx, &mut enc, param, grad, moments, &lr(rate), it);
         }
@@ -306,6 +348,14 @@ impl<'c> Trainer<'c> {
         self.moments.sh = moments;
         Ok(())
     }
+}
+
+/// What an iteration does besides the optimiser step (INRIA's schedule, see `DensifyConfig`).
+#[derive(Clone, Copy, Debug)]
+struct Plan {
+    gather_stats: bool,
+    densify: bool,
+    reset_opacity: bool,
 }
 
 /// Copies per-channel SH blocks of `old_k` coefficients into blocks of `new_k`, zero-filled.

@@ -1,0 +1,225 @@
+//! INRIA adaptive density control as a CPU decision on read-back parameters and statistics:
+//! clone small Gaussians with large view-space gradients, split large ones, prune faint ones.
+//! It runs every `interval` iterations, so the readback cost is amortised.
+
+use cocog_engine::GaussianParams;
+
+use crate::SplitMix64;
+
+/// INRIA 2023 `OptimizationParams` densification defaults (method.md §7).
+#[derive(Clone, Debug, PartialEq)]
+pub struct DensifyConfig {
+    /// Mean view-space (NDC) positional gradient norm at or above which a Gaussian densifies.
+    pub grad_threshold: f32,
+    /// Largest scale (× extent) up to which a Gaussian is cloned; above it, split.
+    pub percent_dense: f32,
+    pub min_opacity: f32,
+    /// Densify at iterations in (from, until) divisible by `interval`; statistics are
+    /// gathered at every iteration below `until`.
+    pub from_iter: u32,
+    pub until_iter: u32,
+    pub interval: u32,
+    /// Opacities are clamped to 0.01 every this many iterations (below `until_iter`); after
+    /// the first reset, Gaussians larger than 0.1 × extent in world space are pruned too.
+    pub opacity_reset_interval: u32,
+}
+
+impl Default for DensifyConfig {
+    fn default() -> Self {
+        Self {
+            grad_threshold: 2e-4,
+            percent_dense: 0.01,
+            min_opacity: 0.005,
+            from_iter: 500,
+            until_iter: 15_000,
+            interval: 100,
+            opacity_reset_interval: 3000,
+        }
+    }
+}
+
+impl DensifyConfig {
+    pub fn densifies_at(&self, it: u32) -> bool {
+        it < self.until_iter && it > self.from_iter && it.is_multiple_of(self.interval.max(1))
+    }
+
+    pub fn resets_opacity_at(&self, it: u32) -> bool {
+        it < self.until_iter && it.is_multiple_of(self.opacity_reset_interval.max(1))
+    }
+}
+
+/// Where one Gaussian of the densified set comes from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Origin {
+    Keep(usize),
+    Clone(usize),
+    /// A split child: the parent's parameters with a sampled mean and the scale / 1.6.
+    Split {
+        parent: usize,
+        mean: [f32; 3],
+        log_scale: [f32; 3],
+    },
+}
+
+impl Origin {
+    fn source(&self) -> usize {
+        match *self {
+            Origin::Keep(i) | Origin::Clone(i) => i,
+            Origin::Split { parent, .. } => parent,
+        }
+    }
+}
+
+/// The densified set, in INRIA order: surviving originals, clones, split children.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DensifyPlan {
+    pub origins: Vec<Origin>,
+    pub cloned: usize,
+    pub split: usize,
+    pub pruned: usize,
+}
+
+/// Split children per parent, and the scale divisor 0.8 · N of INRIA.
+const SPLIT_CHILDREN: usize = 2;
+const SPLIT_SCALE_DIV: f32 = 0.8 * SPLIT_CHILDREN as f32;
+
+/// INRIA `densify_and_prune`. `prune_large` is INRIA's `max_screen_size` branch (after the
+/// first opacity reset); only its world-space test is modelled, because INRIA zeroes
+/// `max_radii2D` in `densification_postfix` just before it, so its screen-size test never fires.
+pub fn plan_densify(
+    g: &GaussianParams,
+    mean_grads: &[f32],
+    extent: f64,
+    prune_large: bool,
+    config: &DensifyConfig,
+    rng: &mut SplitMix64,
+) -> DensifyPlan {
+    let n = g.len();
+    let dense = (f64::from(config.percent_dense) * extent) as f32;
+    let max_scale = |l: &[f32; 3]| l.iter().fold(f32::MIN, |m, &v| m.max(v.exp()));
+    let hot = |i: usize| {
+        mean_grads
+            .get(i)
+            .is_some_and(|&v| v >= config.grad_threshold)
+    };
+    let clones: Vec<usize> = (0..n)
+        .filter(|&i| hot(i) && max_scale(&g.log_scales[i]) <= dense)
+        .collect();
+    let splits: Vec<usize> = (0..n)
+        .filter(|&i| hot(i) && max_scale(&g.log_scales[i]) > dense)
+        .collect();
+    let mut origins: Vec<Origin> = (0..n)
+        .filter(|i| splits.binary_search(i).is_err())
+        .map(Origin::Keep)
+        .collect();
+    origins.extend(clones.iter().map(|&i| Origin::Clone(i)));
+    // torch's `repeat(N, 1)`: all first children, then all second children.
+    for _ in 0..SPLIT_CHILDREN {
+        for &i in &splits {
+            let scale = g.log_scales[i].map(f32::exp);
+            let sample: [f64; 3] = std::array::from_fn(|a| f64::from(scale[a]) * normal(rng));
+            let r = rotation(g.quats[i]);
+            let mean = std::array::from_fn(|row| {
+                let offset: f64 = (0..3).map(|c| r[row][c] * sample[c]).sum();
+                (f64::from(g.means[i][row]) + offset) as f32
+            });
+            let log_scale = scale.map(|s| (s / SPLIT_SCALE_DIV).ln());
+            origins.push(Origin::Split {
+                parent: i,
+                mean,
+                log_scale,
+            });
+        }
+    }
+    let before = origins.len();
+    let large = (0.1 * extent) as f32;
+    origins.retain(|o| {
+        let opacity = sigmoid(g.opacity_logits[o.source()]);
+        let log_scale = match o {
+            Origin::Split { log_scale, .. } => log_scale,
+            _ => &g.log_scales[o.source()],
+        };
+        !(opacity < config.min_opacity || (prune_large && max_scale(log_scale) > large))
+    });
+    DensifyPlan {
+        pruned: before - origins.len(),
+        cloned: clones.len(),
+        split: splits.len(),
+        origins,
+    }
+}
+
+/// Rows of a per-Gaussian buffer of `stride` floats, rearranged by `origins`. New Gaussians
+/// copy their source row, or get zeros when `new_zero` (INRIA starts their Adam moments at 0).
+pub fn gather_rows(data: &[f32], stride: usize, origins: &[Origin], new_zero: bool) -> Vec<f32> {
+    let mut out = Vec::with_capacity(origins.len() * stride);
+    for o in origins {
+        let row = &data[o.source() * stride..(o.source() + 1) * stride];
+        match o {
+            Origin::Keep(_) => out.extend_from_slice(row),
+            _ if new_zero => out.extend(std::iter::repeat_n(0.0, stride)),
+            _ => out.extend_from_slice(row),
+        }
+    }
+    out
+}
+
+/// The densified Gaussians.
+pub fn apply_plan(g: &GaussianParams, plan: &DensifyPlan) -> GaussianParams {
+    let o = &plan.origins;
+    let rows3 = |v: &[[f32; 3]]| -> Vec<[f32; 3]> { o.iter().map(|x| v[x.source()]).collect() };
+    let mut means = rows3(&g.means);
+    let mut log_scales = rows3(&g.log_scales);
+    for (k, x) in o.iter().enumerate() {
+        if let Origin::Split {
+            mean, log_scale, ..
+        } = x
+        {
+            means[k] = *mean;
+            log_scales[k] = *log_scale;
+        }
+    }
+    GaussianParams {
+        sh_degree: g.sh_degree,
+        means,
+        log_scales,
+        quats: o.iter().map(|x| g.quats[x.source()]).collect(),
+        opacity_logits: o.iter().map(|x| g.opacity_logits[x.source()]).collect(),
+        sh: gather_rows(&g.sh, g.sh_stride(), o, false),
+    }
+}
+
+fn sigmoid(x: f32) -> f32 {
+    1.0 / (1.0 + (-x).exp())
+}
+
+/// Standard normal sample (Box–Muller).
+fn normal(rng: &mut SplitMix64) -> f64 {
+    let u1 = 1.0 - rng.next_f64();
+    let u2 = rng.next_f64();
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+}
+
+/// INRIA `build_rotation` of a (w, x, y, z) quaternion, normalised first.
+fn rotation(q: [f32; 4]) -> [[f64; 3]; 3] {
+    let q = q.map(f64::from);
+    let len = q.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-12);
+    let [r, x, y, z] = q.map(|v| v / len);
+    [
+        [
+            1.0 - 2.0 * (y * y + z * z),
+            2.0 * (x * y - r * z),
+            2.0 * (x * z + r * y),
+        ],
+        [
+            2.0 * (x * y + r * z),
+            1.0 - 2.0 * (x * x + z * z),
+            2.0 * (y * z - r * x),
+        ],
+        [
+            2.0 * (x * z - r * y),
+            2.0 * (y * z + r * x),
+            1.0 - 2.0 * (x * x + y * y),
+        ],
+    ]
+}

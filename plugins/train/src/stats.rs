@@ -1,0 +1,80 @@
+//! Densification statistics accumulated on the GPU every iteration; see stats.wgsl.
+
+use cocog_engine::{ForwardState, GpuBuffer, GpuContext, Gradients};
+
+use crate::TrainError;
+use crate::kernel::Kernel;
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    n: u32,
+    half_width: f32,
+    half_height: f32,
+    pad: u32,
+}
+
+/// Per Gaussian: Σ‖∂loss/∂mean2d‖ (NDC units) over the views it was visible in, and how many.
+#[derive(Debug)]
+pub struct GradStats {
+    kernel: Kernel,
+    accum: GpuBuffer,
+    denom: GpuBuffer,
+    len: u32,
+}
+
+impl GradStats {
+    pub fn new(ctx: &GpuContext, num_gaussians: u32) -> Self {
+        Self {
+            kernel: Kernel::new(ctx, include_str!("stats.wgsl"), "accumulate"),
+            accum: ctx.storage("grad accum", u64::from(num_gaussians) * 4),
+            denom: ctx.storage("grad denom", u64::from(num_gaussians) * 4),
+            len: num_gaussians,
+        }
+    }
+
+    /// Zeroed statistics for `num_gaussians` (after densification changed the count).
+    pub fn reset(&mut self, ctx: &GpuContext, num_gaussians: u32) {
+        self.accum = ctx.storage("grad accum", u64::from(num_gaussians) * 4);
+        self.denom = ctx.storage("grad denom", u64::from(num_gaussians) * 4);
+        self.len = num_gaussians;
+    }
+
+    /// Adds one single-image pass of `width`×`height` (no sync).
+    pub fn accumulate(
+        &self,
+        ctx: &GpuContext,
+        state: &ForwardState,
+        grads: &Gradients,
+        width: u32,
+        height: u32,
+    ) {
+        let params = Params {
+            n: self.len,
+            half_width: 0.5 * width as f32,
+            half_height: 0.5 * height as f32,
+            pad: 0,
+        };
+        let mut enc = ctx.device.create_command_encoder(&Default::default());
+        let buffers = [
+            &state.projected.buffer,
+            &grads.v_projected.buffer,
+            &self.accum.buffer,
+            &self.denom.buffer,
+        ];
+        self.kernel
+            .dispatch_1d(ctx, &mut enc, &params, &buffers, self.len);
+        ctx.queue.submit([enc.finish()]);
+    }
+
+    /// Mean gradient norm per Gaussian, 0 where never visible (INRIA turns its NaN into 0).
+    pub fn read_mean(&self, ctx: &GpuContext) -> Result<Vec<f32>, TrainError> {
+        let accum: Vec<f32> = ctx.read(&self.accum, self.len as usize)?;
+        let denom: Vec<f32> = ctx.read(&self.denom, self.len as usize)?;
+        Ok(accum
+            .iter()
+            .zip(&denom)
+            .map(|(a, d)| if *d > 0.0 { a / d } else { 0.0 })
+            .collect())
+    }
+}

@@ -1,0 +1,84 @@
+//! The trainer's side of adaptive density control: read back, decide on the CPU
+//! (`plan_densify`), re-upload parameters and Adam moments in the new order.
+
+use cocog_engine::{AdamMoments, GpuContext, ParamBuffers};
+
+use super::{Moments, Trainer};
+use crate::{
+    DensifyConfig, DensifyPlan, Origin, TrainError, apply_plan, gather_rows, inverse_sigmoid,
+    plan_densify,
+};
+
+/// INRIA `reset_opacity` clamps every opacity to at most this.
+const RESET_OPACITY: f32 = 0.01;
+
+/// Moments of one group rearranged like the Gaussians; new ones start at zero, as INRIA's
+/// `cat_tensors_to_optimizer` does.
+fn regather(
+    ctx: &GpuContext,
+    old: &AdamMoments,
+    stride: usize,
+    origins: &[Origin],
+) -> Result<AdamMoments, TrainError> {
+    let len = old.len as usize;
+    let m: Vec<f32> = ctx.read(&old.m, len)?;
+    let v: Vec<f32> = ctx.read(&old.v, len)?;
+    let (m, v) = (
+        gather_rows(&m, stride, origins, true),
+        gather_rows(&v, stride, origins, true),
+    );
+    Ok(AdamMoments {
+        len: m.len() as u32,
+        m: ctx.storage_from("adam m", &m),
+        v: ctx.storage_from("adam v", &v),
+    })
+}
+
+impl Trainer<'_> {
+    /// INRIA `densify_and_prune` at iteration `it`; statistics restart from zero afterwards.
+    pub(super) fn densify_and_prune(
+        &mut self,
+        config: &DensifyConfig,
+        it: u32,
+    ) -> Result<DensifyPlan, TrainError> {
+        let ctx = self.ctx;
+        let g = self.gaussians()?;
+        let grads = self.stats.read_mean(ctx)?;
+        // INRIA passes max_screen_size only once the first opacity reset has happened.
+        let prune_large = it > config.opacity_reset_interval;
+        let plan = plan_densify(&g, &grads, self.extent, prune_large, config, &mut self.rng);
+        if plan.origins.is_empty() {
+            return Err(TrainError::Invalid(format!(
+                "densification at iteration {it} pruned every Gaussian"
+            )));
+        }
+        let dense = apply_plan(&g, &plan);
+        let o = &plan.origins;
+        let m = &self.moments;
+        let moments = Moments {
+            means: regather(ctx, &m.means, 3, o)?,
+            log_scales: regather(ctx, &m.log_scales, 3, o)?,
+            quats: regather(ctx, &m.quats, 4, o)?,
+            opacity_logits: regather(ctx, &m.opacity_logits, 1, o)?,
+            sh: regather(ctx, &m.sh, g.sh_stride(), o)?,
+        };
+        let params = ParamBuffers::upload(ctx, &[&dense])?;
+        self.stats.reset(ctx, params.num_gaussians);
+        self.moments = moments;
+        self.params = Some(params);
+        Ok(plan)
+    }
+
+    /// INRIA `reset_opacity`: opacity ≤ 0.01 everywhere, and fresh Adam moments for it.
+    pub(super) fn reset_opacity(&mut self) -> Result<(), TrainError> {
+        let ctx = self.ctx;
+        let params = self.params.as_mut().ok_or(TrainError::Poisoned)?;
+        let n = params.num_gaussians;
+        let logits: Vec<f32> = ctx.read(&params.opacity_logits, n as usize)?;
+        let cap = inverse_sigmoid(RESET_OPACITY);
+        let clamped: Vec<f32> = logits.iter().map(|&l| l.min(cap)).collect();
+        params.opacity_logits = ctx.storage_from("opacity_logits", &clamped);
+        self.moments.opacity_logits = AdamMoments::new(ctx, n);
+        Ok(())
+    }
+}
