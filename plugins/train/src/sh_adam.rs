@@ -65,3 +65,45 @@ impl ShAdam {
             .dispatch_1d(ctx, encoder, &params, &buffers, moments.len);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Adam's first step moves every element by exactly lr·sign(g) (m̂ = g, √v̂ = |g|), so the
+    /// per-coefficient rate shows directly in the parameter change.
+    #[test]
+    fn dc_and_higher_order_coefficients_get_their_own_rates() {
+        let ctx = match GpuContext::new() {
+            Ok(ctx) => ctx,
+            Err(e) => {
+                assert!(
+                    std::env::var("CI").as_deref() != Ok("true"),
+                    "CI=true but no usable GPU adapter: {e}"
+                );
+                eprintln!("skipping GPU test: {e}");
+                return;
+            }
+        };
+        // Two Gaussians at degree 1: 3 channels × 4 coefficients each.
+        let n = 24;
+        let grad: Vec<f32> = (0..n)
+            .map(|i| if i % 3 == 0 { -0.5 } else { 0.25 })
+            .collect();
+        let param = ctx.storage_from("param", &vec![1.0f32; n]);
+        let grad_buf = ctx.storage_from("grad", &grad);
+        let moments = AdamMoments::new(&ctx, n as u32);
+        let mut enc = ctx.device.create_command_encoder(&Default::default());
+        let config = AdamConfig::with_lr(0.01);
+        ShAdam::new(&ctx).encode(
+            &ctx, &mut enc, &param, &grad_buf, &moments, 4, &config, 0.0005, 1,
+        );
+        ctx.queue.submit([enc.finish()]);
+        let out: Vec<f32> = ctx.read(&param, n).unwrap();
+        for (i, (p, g)) in out.iter().zip(&grad).enumerate() {
+            let lr = if i % 4 == 0 { 0.01 } else { 0.0005 };
+            let want = 1.0 - lr * g.signum();
+            assert!((p - want).abs() < 1e-6, "element {i}: {p} vs {want}");
+        }
+    }
+}
