@@ -11,6 +11,7 @@ use cocog_pipeline::{Bounds, Camera, Context, Scene, Split, StageError, View};
 use glam::DVec3;
 use serde_json::{Value, json};
 
+use crate::fallback::{FALLBACK_POINTS, fallback_points};
 use crate::input_error;
 
 /// One view as a reader found it, before any checks.
@@ -193,11 +194,25 @@ pub(crate) fn build_scene(
     ctx.progress("check images", n, n);
     scene.up = estimate_up(&scene.views);
     scene.bounds = data.bounds;
-    let points = data.points.as_ref().map_or(0, PointCloud::len);
-    if let Some(cloud) = data.points.as_ref().filter(|c| !c.is_empty()) {
-        cocog_formats::ply::write_points(&out.join("points.ply"), cloud).map_err(input_error)?;
-        scene.points = Some("points.ply".to_owned());
-    }
+    let from_dataset = data.points.as_ref().is_some_and(|c| !c.is_empty());
+    let cloud = match data.points.take().filter(|c| !c.is_empty()) {
+        Some(c) => c,
+        None => {
+            ctx.warn(&format!(
+                "{}: the dataset has no SfM points; starting from {FALLBACK_POINTS} random points {}",
+                dataset.display(),
+                if scene.bounds.is_some() {
+                    "in the train views' frusta between the near and far bounds"
+                } else {
+                    "in a cube of side 2.6 around the origin (INRIA's synthetic-scene rule)"
+                }
+            ));
+            fallback_points(&scene, FALLBACK_POINTS, 0)
+        }
+    };
+    let points = cloud.len();
+    cocog_formats::ply::write_points(&out.join("points.ply"), &cloud).map_err(input_error)?;
+    scene.points = Some("points.ply".to_owned());
     scene.save(out)?;
     let test = scene.views_in(Split::Test).count();
     let summary = json!({
@@ -207,6 +222,7 @@ pub(crate) fn build_scene(
         "split": if use_declared { "dataset".to_owned() } else { format!("hold={hold}") },
         "cameras": scene.cameras.len(),
         "points": points,
+        "points_source": if from_dataset { "dataset" } else { "random fallback" },
         "downscale": settings.downscale,
     });
     Ok((scene, summary))

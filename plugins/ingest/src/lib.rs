@@ -8,10 +8,13 @@
 //! has it, else resampling into the scene's `images/`); `hold` chooses the test split: test views
 //! are those whose index in name order is a multiple of `hold`. `hold = 0` (the default) means
 //! "as the dataset says": per-frame splits of transforms.json, else the `hold=N` marker file,
-//! else 8. Ground-truth lens data in a dataset is not copied into the scene: training must not
+//! else 8. A dataset without SfM points (LLFF without `sparse/`, transforms.json) starts from
+//! 100k random points: in the train frusta between the near/far bounds when known, else in
+//! INRIA's cube of side 2.6. Ground-truth lens data in a dataset is not copied into the scene: training must not
 //! see it.
 
 mod build;
+mod fallback;
 mod readers;
 
 use cocog_formats::FormatError;

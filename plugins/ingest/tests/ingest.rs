@@ -86,7 +86,13 @@ fn colmap_llff_and_nerf_give_the_same_scene() {
         assert_eq!(c.points.as_deref(), Some("points.ply"));
         let pts = cocog_formats::ply::read_points(&c_dir.path().join("out/points.ply")).unwrap();
         assert!(pts.len() > 1000);
-        assert!(l.points.is_some() && n.points.is_none());
+        assert!(l.points.is_some() && n.points.is_some());
+        // transforms.json carries no points: the random fallback fills the cube INRIA uses.
+        let fallback =
+            cocog_formats::ply::read_points(&n_dir.path().join("out/points.ply")).unwrap();
+        assert_eq!(fallback.len(), 100_000);
+        assert_eq!(n_sum["points_source"], "random fallback");
+        assert_eq!(c_sum["points_source"], "dataset");
         let up = c.up.unwrap();
         assert!(up[2] > 0.9, "{up:?}");
         assert!(
