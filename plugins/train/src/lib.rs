@@ -18,6 +18,7 @@ mod init;
 mod kernel;
 mod order;
 mod sh_adam;
+mod stage;
 mod stats;
 mod trainer;
 
@@ -26,5 +27,11 @@ pub use densify::{DensifyConfig, DensifyPlan, Origin, apply_plan, gather_rows, p
 pub use error::TrainError;
 pub use init::{SH_C0, init_from_points, inverse_sigmoid, rgb_to_sh, scene_extent};
 pub use order::{SplitMix64, ViewOrder};
+pub use stage::{Train, to_splats};
 pub use stats::GradStats;
 pub use trainer::{StepStats, TrainView, Trainer};
+
+/// The stages this crate provides to the pipeline host.
+pub fn stages() -> Vec<Box<dyn cocog_pipeline::Stage>> {
+    vec![Box::new(Train)]
+}

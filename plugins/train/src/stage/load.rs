@@ -1,0 +1,133 @@
+//! Scene → trainer inputs: the initial Gaussians from `points.ply` and the train-split views.
+
+use std::path::Path;
+
+use cocog_engine::{Camera, GaussianParams};
+use cocog_formats::images::{downscaled_size, load_rgb, write_downscaled};
+use cocog_formats::splats::Splats;
+use cocog_pipeline::{Context, Scene, Split, StageError};
+
+use crate::{TrainView, init_from_points};
+
+/// Reads the scene's point cloud (the `points` field of scene.json) and initialises Gaussians.
+pub fn initial_gaussians(scene: &Scene, input: &Path) -> Result<GaussianParams, StageError> {
+    let stored = scene.points.as_deref().ok_or_else(|| {
+        StageError::Input(format!(
+            "{}: scene.json has no field `points`; training starts from a point cloud \
+             (run an ingest stage that writes points.ply)",
+            input.display()
+        ))
+    })?;
+    let path = Scene::resolve(input, stored);
+    let cloud = cocog_formats::ply::read_points(&path)
+        .map_err(|e| StageError::Input(format!("scene.json `points`: {e}")))?;
+    let positions: Vec<[f32; 3]> = cloud
+        .positions
+        .chunks_exact(3)
+        .map(|p| [p[0], p[1], p[2]])
+        .collect();
+    // The images are trained on as stored (sRGB-encoded), so colours stay in that space too,
+    // as INRIA does with the SfM colours / 255.
+    let colors: Vec<[f32; 3]> = cloud
+        .colors
+        .chunks_exact(3)
+        .map(|c| [c[0], c[1], c[2]].map(|v| f32::from(v) / 255.0))
+        .collect();
+    init_from_points(&positions, &colors)
+        .map_err(|e| StageError::Input(format!("{}: {e}", path.display())))
+}
+
+/// Loads every train-split view, shrunk by `downscale` with intrinsics scaled to match.
+/// `scratch` holds the downscaled PNGs (formats' area filter only writes files); the caller
+/// removes it.
+pub fn train_views(
+    scene: &Scene,
+    input: &Path,
+    downscale: u32,
+    background: [f32; 3],
+    scratch: &Path,
+    ctx: &dyn Context,
+) -> Result<Vec<TrainView>, StageError> {
+    let views: Vec<_> = scene.views_in(Split::Train).collect();
+    if views.is_empty() {
+        return Err(StageError::Input(format!(
+            "{}: scene.json has no views with split \"train\"",
+            input.display()
+        )));
+    }
+    let total = views.len() as u64;
+    let mut out = Vec::with_capacity(views.len());
+    for (i, view) in views.iter().enumerate() {
+        ctx.check_cancelled()?;
+        ctx.progress("load images", i as u64, total);
+        let cam = scene.camera(view.camera).ok_or_else(|| {
+            StageError::Input(format!(
+                "scene.json view {:?}: camera {} does not exist",
+                view.name, view.camera
+            ))
+        })?;
+        let (w, h) = downscaled_size(cam.width, cam.height, downscale);
+        let src = Scene::resolve(input, &view.image);
+        let path = if downscale > 1 {
+            let dst = scratch.join(format!("{i}.png"));
+            write_downscaled(&src, &dst, downscale)
+                .map_err(|e| StageError::Input(format!("view {:?}: {e}", view.name)))?;
+            dst
+        } else {
+            src.clone()
+        };
+        let img = load_rgb(&path, Some(background))
+            .map_err(|e| StageError::Input(format!("view {:?}: {e}", view.name)))?;
+        if (img.width, img.height) != (w, h) {
+            return Err(StageError::Input(format!(
+                "{}: image is {}×{} after downscale {downscale}, but camera {} of view {:?} is {w}×{h}",
+                src.display(),
+                img.width,
+                img.height,
+                view.camera,
+                view.name
+            )));
+        }
+        // Pixel-corner convention (as ingest): every intrinsic scales by the size ratio.
+        let (sx, sy) = (
+            f64::from(w) / f64::from(cam.width),
+            f64::from(h) / f64::from(cam.height),
+        );
+        out.push(TrainView {
+            camera: Camera {
+                fx: cam.fx * sx,
+                fy: cam.fy * sy,
+                cx: cam.cx * sx,
+                cy: cam.cy * sy,
+                width: w,
+                height: h,
+                world_from_camera: view.world_from_camera,
+            },
+            image: img
+                .data
+                .chunks_exact(3)
+                .map(|p| [p[0], p[1], p[2]])
+                .collect(),
+        });
+    }
+    ctx.progress("load images", total, total);
+    Ok(out)
+}
+
+/// The engine's per-Gaussian channel-major SH block split into the PLY's DC and rest arrays.
+pub fn to_splats(g: &GaussianParams) -> Splats {
+    let k1 = g.sh_stride() / 3;
+    let mut s = Splats::with_capacity(g.len(), g.sh_degree);
+    for i in 0..g.len() {
+        s.means.extend(g.means[i]);
+        s.log_scales.extend(g.log_scales[i]);
+        s.rotations.extend(g.quats[i]);
+        s.opacities.push(g.opacity_logits[i]);
+        let sh = &g.sh[i * 3 * k1..(i + 1) * 3 * k1];
+        s.sh_dc.extend((0..3).map(|c| sh[c * k1]));
+        for c in 0..3 {
+            s.sh_rest.extend_from_slice(&sh[c * k1 + 1..(c + 1) * k1]);
+        }
+    }
+    s
+}
