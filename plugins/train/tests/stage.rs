@@ -87,6 +87,7 @@ fn train_stage_writes_gaussians_log_and_scene() {
         .collect();
     assert!(lines.len() >= 2, "log has {} lines", lines.len());
     let losses: Vec<f64> = lines.iter().map(|l| l["loss"].as_f64().unwrap()).collect();
+    eprintln!("logged losses: {losses:.4?}");
     assert!(losses.iter().all(|l| l.is_finite()), "{losses:?}");
     assert!(
         losses.last() < losses.first(),
