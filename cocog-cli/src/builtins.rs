@@ -9,7 +9,6 @@ pub const PLANNED: &[(&str, &str)] = &[
         "eval-scene",
         "the GPU engine (issue #5): it renders the scene first",
     ),
-    ("train", "the GPU engine (issue #5)"),
     ("render", "the GPU engine (issue #5)"),
 ];
 
@@ -21,6 +20,7 @@ pub fn planned(name: &str) -> Option<&'static str> {
 pub fn register(registry: &mut Registry) {
     registry.add_builtins(cocog_ingest::stages());
     registry.add_builtins(cocog_densify::stages());
+    registry.add_builtins(cocog_train::stages());
     registry.add_builtins(cocog_prune::stages());
     registry.add_builtins(cocog_export::stages());
     registry.add_builtins(cocog_convert::stages());

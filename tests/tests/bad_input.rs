@@ -112,7 +112,7 @@ fn bad_option_values_are_named() {
 
 #[test]
 fn unavailable_stage_exits_3_and_says_what_brings_it() {
-    let out = cocog(&["train", "a", "-o", "b"]);
+    let out = cocog(&["render", "a", "-o", "b"]);
     assert_eq!(out.status.code(), Some(3), "{}", stderr(&out));
     assert!(stderr(&out).contains("issue #5"), "{}", stderr(&out));
 }

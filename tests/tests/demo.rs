@@ -9,18 +9,14 @@ fn demo_generates_its_dataset_and_runs_the_available_stages() {
     let out = cocog(&["demo", "-o", path_str(&root)]);
     assert!(out.status.success(), "{}", stderr(&out));
     let names = listing(&root);
-    for expected in ["1-ingest", "2-densify", "dataset"] {
+    for expected in ["1-ingest", "2-densify", "3-train", "dataset", "scene.ply"] {
         assert!(names.contains(&expected.to_owned()), "{names:?}");
     }
     assert_eq!(listing(&root.join("dataset/images")).len(), 16);
     // Stdout is the last output that was produced.
     let last = stdout(&out);
-    assert!(
-        std::path::Path::new(last.trim())
-            .join("scene.json")
-            .exists(),
-        "{last}"
-    );
+    assert!(last.trim().ends_with("scene.ply"), "{last}");
+    assert!(root.join("3-train/gaussians.ply").exists());
     // A rerun replaces the demo's own directory without --force...
     let again = cocog(&["demo", "-o", path_str(&root)]);
     assert!(again.status.success(), "{}", stderr(&again));
