@@ -33,6 +33,7 @@
 mod error;
 pub mod gpu;
 pub mod reference;
+mod splats;
 mod types;
 
 pub use error::EngineError;

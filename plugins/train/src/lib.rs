@@ -27,7 +27,7 @@ pub use densify::{DensifyConfig, DensifyPlan, Origin, apply_plan, gather_rows, p
 pub use error::TrainError;
 pub use init::{SH_C0, init_from_points, inverse_sigmoid, rgb_to_sh, scene_extent};
 pub use order::{SplitMix64, ViewOrder};
-pub use stage::{Train, to_splats};
+pub use stage::Train;
 pub use stats::GradStats;
 pub use trainer::{StepStats, TrainView, Trainer};
 

@@ -13,8 +13,6 @@ use serde_json::{Value, json};
 
 use crate::{TrainConfig, Trainer};
 
-pub use load::to_splats;
-
 /// Vanilla 3DGS now; CoCoGaussian (`method = "cocog"`) is refused until it exists.
 pub struct Train;
 
@@ -168,7 +166,7 @@ impl Stage for Train {
 
         let gaussians = trainer.gaussians().map_err(StageError::other)?;
         let ply = req.output.join("gaussians.ply");
-        cocog_formats::ply::write_splats(&ply, &to_splats(&gaussians), None)
+        cocog_formats::ply::write_splats(&ply, &(&gaussians).into(), None)
             .map_err(StageError::other)?;
         scene.gaussians = Some("gaussians.ply".to_owned());
         scene.save(&req.output)?;

@@ -4,7 +4,6 @@ use std::path::Path;
 
 use cocog_engine::{Camera, GaussianParams};
 use cocog_formats::images::{downscaled_size, load_rgb, write_downscaled};
-use cocog_formats::splats::Splats;
 use cocog_pipeline::{Context, Scene, Split, StageError};
 
 use crate::{TrainView, init_from_points};
@@ -112,22 +111,4 @@ pub fn train_views(
     }
     ctx.progress("load images", total, total);
     Ok(out)
-}
-
-/// The engine's per-Gaussian channel-major SH block split into the PLY's DC and rest arrays.
-pub fn to_splats(g: &GaussianParams) -> Splats {
-    let k1 = g.sh_stride() / 3;
-    let mut s = Splats::with_capacity(g.len(), g.sh_degree);
-    for i in 0..g.len() {
-        s.means.extend(g.means[i]);
-        s.log_scales.extend(g.log_scales[i]);
-        s.rotations.extend(g.quats[i]);
-        s.opacities.push(g.opacity_logits[i]);
-        let sh = &g.sh[i * 3 * k1..(i + 1) * 3 * k1];
-        s.sh_dc.extend((0..3).map(|c| sh[c * k1]));
-        for c in 0..3 {
-            s.sh_rest.extend_from_slice(&sh[c * k1 + 1..(c + 1) * k1]);
-        }
-    }
-    s
 }
