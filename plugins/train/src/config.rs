@@ -22,6 +22,10 @@ pub struct TrainConfig {
     pub sh_degree_interval: u32,
     pub max_sh_degree: u32,
     pub background: [f32; 3],
+    /// Composite each training render over a random colour instead (INRIA's
+    /// `--random_background`): transparency can no longer pass for a matching background,
+    /// which keeps floaters' opacity honest. Evaluation renders keep `background`.
+    pub random_background: bool,
     /// Seeds the view order.
     pub seed: u64,
     /// Read the loss back (one GPU→CPU sync) every this many iterations; 0 never.
@@ -44,6 +48,7 @@ impl Default for TrainConfig {
             sh_degree_interval: 1000,
             max_sh_degree: 3,
             background: [0.0; 3],
+            random_background: false,
             seed: 0,
             loss_every: 100,
             densify: Some(DensifyConfig::default()),

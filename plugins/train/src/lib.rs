@@ -11,6 +11,7 @@
 //! The GPU backward accumulates gradients with float atomics, whose summation order varies,
 //! so parameters agree between runs only to rounding.
 
+mod checkpoint;
 mod config;
 mod densify;
 mod error;
@@ -22,6 +23,7 @@ mod stage;
 mod stats;
 mod trainer;
 
+pub use checkpoint::{CHECKPOINT_FILE, CheckpointError, MomentState, TrainState};
 pub use config::TrainConfig;
 pub use densify::{DensifyConfig, DensifyPlan, Origin, apply_plan, gather_rows, plan_densify};
 pub use error::TrainError;
@@ -29,7 +31,7 @@ pub use init::{SH_C0, init_from_points, inverse_sigmoid, rgb_to_sh, scene_extent
 pub use order::{SplitMix64, ViewOrder};
 pub use stage::Train;
 pub use stats::GradStats;
-pub use trainer::{StepStats, TrainView, Trainer};
+pub use trainer::{PhaseTimes, StepStats, TrainView, Trainer};
 
 /// The stages this crate provides to the pipeline host.
 pub fn stages() -> Vec<Box<dyn cocog_pipeline::Stage>> {

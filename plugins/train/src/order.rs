@@ -9,6 +9,11 @@ impl SplitMix64 {
         Self(seed)
     }
 
+    /// The internal state; `SplitMix64::new(state)` continues the sequence from here.
+    pub fn state(&self) -> u64 {
+        self.0
+    }
+
     pub fn next_u64(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = self.0;
@@ -46,6 +51,20 @@ impl ViewOrder {
         }
     }
 
+    /// Continues an order saved with `state`: the generator and the views left this epoch.
+    pub fn resume(views: usize, rng: u64, stack: Vec<usize>) -> Self {
+        Self {
+            views,
+            stack,
+            rng: SplitMix64::new(rng),
+        }
+    }
+
+    /// Generator state and the views not yet visited this epoch.
+    pub fn state(&self) -> (u64, &[usize]) {
+        (self.rng.state(), &self.stack)
+    }
+
     /// The next view index; `None` only when there are no views.
     pub fn next_view(&mut self) -> Option<usize> {
         if self.views == 0 {
@@ -79,5 +98,14 @@ mod tests {
         assert_eq!(take(&mut ViewOrder::new(7, 42), 21), seq);
         assert_ne!(take(&mut ViewOrder::new(7, 43), 21), seq);
         assert_eq!(ViewOrder::new(0, 1).next_view(), None);
+    }
+
+    #[test]
+    fn a_resumed_order_continues_the_same_sequence() {
+        let mut a = ViewOrder::new(5, 9);
+        take(&mut a, 3);
+        let (rng, stack) = a.state();
+        let mut b = ViewOrder::resume(5, rng, stack.to_vec());
+        assert_eq!(take(&mut b, 12), take(&mut a, 12));
     }
 }

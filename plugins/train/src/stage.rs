@@ -1,17 +1,18 @@
 //! The `train` pipeline stage: scene + points.ply in, scene + gaussians.ply out.
 
 mod load;
+mod session;
 
-use std::io::{BufWriter, Write};
-use std::time::Instant;
+use std::path::PathBuf;
 
 use cocog_engine::GpuContext;
 use cocog_pipeline::{
-    Context, OptionSpec, OutputKind, Scene, Stage, StageError, StageInfo, StageKind, StageRequest,
+    Context, OptionKind, OptionSpec, OutputKind, Scene, Stage, StageError, StageInfo, StageKind,
+    StageRequest,
 };
 use serde_json::{Value, json};
 
-use crate::{TrainConfig, Trainer};
+use crate::{TrainConfig, TrainState, Trainer};
 
 /// Vanilla 3DGS now; CoCoGaussian (`method = "cocog"`) is refused until it exists.
 pub struct Train;
@@ -29,13 +30,40 @@ fn options() -> Vec<OptionSpec> {
             1,
             "train on images shrunk by this factor (intrinsics scaled to match)",
         ),
-        OptionSpec::int("seed", 0, "seeds the view order"),
+        OptionSpec::int(
+            "seed",
+            0,
+            "seeds the view order, splits and random backgrounds",
+        ),
         OptionSpec::int(
             "coc_gaussians",
             5,
             "CoC Gaussians per base Gaussian (only used by method cocog)",
         ),
         OptionSpec::int("sh_degree", 3, "largest spherical-harmonics degree, 0 to 3"),
+        OptionSpec::bool(
+            "random_background",
+            false,
+            "composite every training render over a random colour (discourages transparent \
+             floaters); evaluation renders stay black",
+        ),
+        OptionSpec::optional(
+            "resume",
+            OptionKind::Path,
+            "continue from a checkpoint: a train output (its checkpoint/), a checkpoint \
+             directory, or its state.safetensors",
+        ),
+        OptionSpec::optional(
+            "checkpoint_dir",
+            OptionKind::Path,
+            "where to keep a checkpoint while training (every checkpoint_every iterations and \
+             on Ctrl-C), removed when the run succeeds; the CLI uses OUTPUT.checkpoint",
+        ),
+        OptionSpec::int(
+            "checkpoint_every",
+            1000,
+            "iterations between checkpoints in checkpoint_dir; 0 only on interruption",
+        ),
     ]
 }
 
@@ -59,123 +87,136 @@ fn log_interval(iterations: u32) -> u32 {
     (iterations / 10).clamp(1, 500)
 }
 
+fn check_method(req: &StageRequest) -> Result<(), StageError> {
+    match req.options.get_str("method").unwrap_or("3dgs") {
+        "3dgs" => Ok(()),
+        "cocog" => Err(StageError::Options(
+            "method 'cocog' (CoCoGaussian) is not implemented yet; use --method 3dgs".to_owned(),
+        )),
+        other => Err(StageError::Options(format!(
+            "stage 'train' option 'method': unknown method '{other}' (use 3dgs)"
+        ))),
+    }
+}
+
+/// What the options ask for, checked before any file is read.
+struct Plan {
+    config: TrainConfig,
+    downscale: u32,
+    resume: Option<PathBuf>,
+    checkpoint_dir: Option<PathBuf>,
+    checkpoint_every: u32,
+}
+
+fn plan(req: &StageRequest) -> Result<Plan, StageError> {
+    check_method(req)?;
+    let iterations = int(req, "iterations", 1, i64::from(u32::MAX))? as u32;
+    // Validated so a typo fails now rather than when cocog lands.
+    int(req, "coc_gaussians", 1, 64)?;
+    Ok(Plan {
+        config: TrainConfig {
+            iterations,
+            max_sh_degree: int(req, "sh_degree", 0, 3)? as u32,
+            seed: int(req, "seed", 0, i64::MAX)? as u64,
+            loss_every: log_interval(iterations),
+            random_background: req.options.get_bool("random_background").unwrap_or(false),
+            ..TrainConfig::default()
+        },
+        downscale: int(req, "downscale", 1, 64)? as u32,
+        resume: req.options.get_path("resume"),
+        checkpoint_dir: req.options.get_path("checkpoint_dir"),
+        checkpoint_every: int(req, "checkpoint_every", 0, i64::from(u32::MAX))? as u32,
+    })
+}
+
+/// The checkpoint to resume from, refused if it cannot continue this run.
+fn load_resume(plan: &Plan) -> Result<Option<TrainState>, StageError> {
+    let Some(path) = &plan.resume else {
+        return Ok(None);
+    };
+    let state = TrainState::load(path).map_err(|e| StageError::Input(e.to_string()))?;
+    let what = format!("option 'resume' ({})", path.display());
+    if state.downscale != plan.downscale {
+        return Err(StageError::Options(format!(
+            "{what}: the checkpoint was trained at downscale {}, this run asks for {}",
+            state.downscale, plan.downscale
+        )));
+    }
+    if state.iteration >= plan.config.iterations {
+        return Err(StageError::Options(format!(
+            "{what}: the checkpoint is already at iteration {}; ask for more --iterations",
+            state.iteration
+        )));
+    }
+    if state.params.sh_degree > plan.config.max_sh_degree {
+        return Err(StageError::Options(format!(
+            "{what}: the checkpoint has SH degree {}, above option 'sh_degree' = {}",
+            state.params.sh_degree, plan.config.max_sh_degree
+        )));
+    }
+    Ok(Some(state))
+}
+
 impl Stage for Train {
     fn info(&self) -> StageInfo {
         StageInfo {
             name: "train".to_owned(),
             kind: StageKind::Train,
             output: OutputKind::Dir,
-            description: "Optimise 3D Gaussians from the scene's points and train views".to_owned(),
+            description: "Optimise 3D Gaussians from the scene's points and train views; \
+                          writes gaussians.ply, checkpoint/ and train-log.jsonl"
+                .to_owned(),
             options: options(),
         }
     }
 
     fn run(&self, req: &StageRequest, ctx: &dyn Context) -> Result<Value, StageError> {
-        match req.options.get_str("method").unwrap_or("3dgs") {
-            "3dgs" => {}
-            "cocog" => {
-                return Err(StageError::Options(
-                    "method 'cocog' (CoCoGaussian) is not implemented yet; use --method 3dgs"
-                        .to_owned(),
-                ));
-            }
-            other => {
-                return Err(StageError::Options(format!(
-                    "stage 'train' option 'method': unknown method '{other}' (use 3dgs)"
-                )));
-            }
-        }
-        let iterations = int(req, "iterations", 1, i64::from(u32::MAX))? as u32;
-        let downscale = int(req, "downscale", 1, 64)? as u32;
-        let seed = int(req, "seed", 0, i64::MAX)? as u64;
-        // Validated so a typo fails now rather than when cocog lands.
-        int(req, "coc_gaussians", 1, 64)?;
-        let sh_degree = int(req, "sh_degree", 0, 3)? as u32;
-
+        let plan = plan(req)?;
+        let resume = load_resume(&plan)?;
         let mut scene = Scene::load(&req.input)?;
         scene.rebase(&req.input)?;
-        let init = load::initial_gaussians(&scene, &req.input)?;
-        let log_every = log_interval(iterations);
-        let config = TrainConfig {
-            iterations,
-            max_sh_degree: sh_degree,
-            seed,
-            loss_every: log_every,
-            ..TrainConfig::default()
+        let init = match &resume {
+            Some(state) => state.params.clone(),
+            None => load::initial_gaussians(&scene, &req.input)?,
         };
-        let scratch = req.output.join(".downscaled");
-        if downscale > 1 {
-            std::fs::create_dir_all(&scratch).map_err(|e| StageError::io(&scratch, e))?;
-        }
-        let views = load::train_views(
-            &scene,
-            &req.input,
-            downscale,
-            config.background,
-            &scratch,
-            ctx,
-        );
-        if downscale > 1 {
-            std::fs::remove_dir_all(&scratch).map_err(|e| StageError::io(&scratch, e))?;
-        }
-        let views = views?;
+        let views = load::train_views_scratch(&scene, req, plan.downscale, &plan.config, ctx)?;
 
         let gpu = GpuContext::new().map_err(StageError::other)?;
         let adapter = gpu.adapter_name();
+        let (w, h) = (views[0].camera.width, views[0].camera.height);
+        let start = resume.as_ref().map_or(0, |s| s.iteration);
         ctx.info(&format!(
-            "training {} Gaussians on {} views ({}×{}) for {iterations} iterations on {adapter}",
+            "training {} Gaussians on {} views ({w}×{h}), iterations {}..={} on {adapter}",
             init.len(),
             views.len(),
-            views[0].camera.width,
-            views[0].camera.height
+            start + 1,
+            plan.config.iterations
         ));
-        let mut trainer = Trainer::new(&gpu, &init, &views, config).map_err(StageError::other)?;
-        drop(views);
-
-        let log_path = req.output.join("train-log.jsonl");
-        let file = std::fs::File::create(&log_path).map_err(|e| StageError::io(&log_path, e))?;
-        let mut log = BufWriter::new(file);
-        let start = Instant::now();
-        let mut final_loss = None;
-        for it in 1..=iterations {
-            ctx.check_cancelled()?;
-            let stats = trainer.step().map_err(StageError::other)?;
-            if it % 10 == 0 || it == iterations {
-                ctx.progress("train", u64::from(it), u64::from(iterations));
-            }
-            if let Some(loss) = stats.loss {
-                final_loss = Some(loss);
-                let elapsed = start.elapsed().as_secs_f64();
-                let rate = f64::from(it) / elapsed.max(1e-9);
-                let line = json!({
-                    "iteration": it,
-                    "loss": loss,
-                    "gaussians": stats.num_gaussians,
-                    "elapsed_s": elapsed,
-                    "it_per_s": rate,
-                });
-                writeln!(log, "{line}").map_err(|e| StageError::io(&log_path, e))?;
-                ctx.info(&format!(
-                    "iteration {it}/{iterations}: loss {loss:.5}, {} Gaussians, {rate:.1} it/s",
-                    stats.num_gaussians
-                ));
-            }
+        let trainer = match &resume {
+            Some(state) => Trainer::resume(&gpu, state, &views, plan.config.clone()),
+            None => Trainer::new(&gpu, &init, &views, plan.config.clone()),
         }
-        log.flush().map_err(|e| StageError::io(&log_path, e))?;
-        let seconds = start.elapsed().as_secs_f64();
+        .map_err(|e| StageError::Input(format!("{}: {e}", req.input.display())))?;
+        drop((views, init, resume));
 
-        let gaussians = trainer.gaussians().map_err(StageError::other)?;
+        let mut session = session::Session::new(trainer, &plan, &req.output)?;
+        let outcome = session.run(ctx)?;
+
+        let gaussians = session.trainer.gaussians().map_err(StageError::other)?;
         let ply = req.output.join("gaussians.ply");
         cocog_formats::ply::write_splats(&ply, &(&gaussians).into(), None)
             .map_err(StageError::other)?;
+        session.save_final(&req.output.join("checkpoint"))?;
         scene.gaussians = Some("gaussians.ply".to_owned());
         scene.save(&req.output)?;
         Ok(json!({
-            "iterations": iterations,
+            "iterations": plan.config.iterations,
+            "resumed_from": start,
             "gaussians": gaussians.len(),
-            "final_loss": final_loss,
-            "seconds": seconds,
-            "it_per_s": f64::from(iterations) / seconds.max(1e-9),
+            "final_loss": outcome.final_loss,
+            "final_psnr": outcome.final_psnr,
+            "seconds": outcome.seconds,
+            "it_per_s": outcome.it_per_s,
             "adapter": adapter,
         }))
     }

@@ -33,6 +33,22 @@ impl GradStats {
         }
     }
 
+    /// Statistics restored from a checkpoint (`read_raw`'s output).
+    pub fn from_raw(ctx: &GpuContext, accum: &[f32], denom: &[f32]) -> Self {
+        Self {
+            kernel: Kernel::new(ctx, include_str!("stats.wgsl"), "accumulate"),
+            accum: ctx.storage_from("grad accum", accum),
+            denom: ctx.storage_from("grad denom", denom),
+            len: accum.len() as u32,
+        }
+    }
+
+    /// The running sums and counts, for a checkpoint.
+    pub fn read_raw(&self, ctx: &GpuContext) -> Result<(Vec<f32>, Vec<f32>), TrainError> {
+        let n = self.len as usize;
+        Ok((ctx.read(&self.accum, n)?, ctx.read(&self.denom, n)?))
+    }
+
     /// Zeroed statistics for `num_gaussians` (after densification changed the count).
     pub fn reset(&mut self, ctx: &GpuContext, num_gaussians: u32) {
         self.accum = ctx.storage("grad accum", u64::from(num_gaussians) * 4);

@@ -9,6 +9,7 @@ use crate::sh_adam::ShAdam;
 use crate::{GradStats, SplitMix64, TrainConfig, TrainError, ViewOrder, scene_extent};
 
 mod density;
+mod snapshot;
 
 /// One training image: its camera and its linear RGB pixels, row-major, `width × height`.
 #[derive(Clone, Debug)]
@@ -28,6 +29,76 @@ pub struct StepStats {
     pub num_gaussians: u32,
     /// Only on iterations divisible by `TrainConfig::loss_every` (reading it syncs the GPU).
     pub loss: Option<f64>,
+    /// PSNR (dB) of this iteration's render against its view, on the same iterations as
+    /// `loss`; colours clamped to [0, 1] as a saved image would be.
+    pub psnr: Option<f64>,
+    /// Wall time per phase, only while `Trainer::set_profiling(true)`.
+    pub phases: Option<PhaseTimes>,
+}
+
+/// Seconds one iteration spent in each phase. Profiling waits for the GPU after every phase,
+/// which serialises CPU and GPU work: the sum is slower than an unprofiled iteration.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PhaseTimes {
+    /// Projection, sorting, rasterisation and the loss with its gradient.
+    pub forward: f64,
+    pub backward: f64,
+    /// Adam on every group.
+    pub optimizer: f64,
+    /// Gradient statistics, densify/prune decisions and re-uploads, opacity resets.
+    pub density: f64,
+}
+
+impl PhaseTimes {
+    pub fn total(&self) -> f64 {
+        self.forward + self.backward + self.optimizer + self.density
+    }
+
+    pub fn add(&mut self, other: &PhaseTimes) {
+        self.forward += other.forward;
+        self.backward += other.backward;
+        self.optimizer += other.optimizer;
+        self.density += other.density;
+    }
+}
+
+/// Measures phases by waiting for the GPU at each boundary; free when disabled.
+struct Stopwatch {
+    enabled: bool,
+    last: std::time::Instant,
+    times: PhaseTimes,
+}
+
+impl Stopwatch {
+    fn new(enabled: bool) -> Self {
+        Self {
+            enabled,
+            last: std::time::Instant::now(),
+            times: PhaseTimes::default(),
+        }
+    }
+
+    /// Seconds since the previous lap, after the GPU finished what was submitted.
+    fn lap(&mut self, ctx: &GpuContext) -> Result<f64, TrainError> {
+        if !self.enabled {
+            return Ok(0.0);
+        }
+        ctx.wait()?;
+        let now = std::time::Instant::now();
+        let dt = (now - self.last).as_secs_f64();
+        self.last = now;
+        Ok(dt)
+    }
+
+    fn result(&self) -> Option<PhaseTimes> {
+        self.enabled.then_some(self.times)
+    }
+}
+
+/// What `optimise` reads back on logging iterations.
+struct Readings {
+    loss: Option<f64>,
+    psnr: Option<f64>,
 }
 
 /// Adam state of each parameter group.
@@ -76,6 +147,7 @@ pub struct Trainer<'c> {
     rng: SplitMix64,
     extent: f64,
     iteration: u32,
+    profiling: bool,
 }
 
 impl<'c> Trainer<'c> {
@@ -87,37 +159,30 @@ impl<'c> Trainer<'c> {
         views: &[TrainView],
         config: TrainConfig,
     ) -> Result<Self, TrainError> {
-        let first = views
-            .first()
-            .ok_or_else(|| TrainError::Invalid("no training views".into()))?;
-        let (w, h) = (first.camera.width, first.camera.height);
-        for (i, v) in views.iter().enumerate() {
-            if (v.camera.width, v.camera.height) != (w, h) {
-                return Err(TrainError::Invalid(format!(
-                    "view {i} is {}×{}, view 0 is {w}×{h}",
-                    v.camera.width, v.camera.height
-                )));
-            }
-            if v.image.len() != (w * h) as usize {
-                return Err(TrainError::Invalid(format!(
-                    "view {i} has {} pixels, its camera {}",
-                    v.image.len(),
-                    w * h
-                )));
-            }
-        }
-        if config.max_sh_degree > MAX_SH_DEGREE || init.sh_degree > config.max_sh_degree {
-            return Err(TrainError::Invalid(format!(
-                "SH degree {} / max {} (engine max {MAX_SH_DEGREE})",
-                init.sh_degree, config.max_sh_degree
-            )));
-        }
-        if init.is_empty() {
-            return Err(TrainError::Invalid("no Gaussians to train".into()));
-        }
+        check_inputs(init, views, &config)?;
+        let params = ParamBuffers::upload(ctx, &[init])?;
+        let state = Resumed {
+            moments: Moments::new(ctx, &params),
+            stats: GradStats::new(ctx, params.num_gaussians),
+            // Decorrelated from the view order, which uses the seed as is.
+            rng: SplitMix64::new(config.seed ^ 0xD3A5_17F0_0000_0001),
+            order: ViewOrder::new(views.len(), config.seed),
+            iteration: 0,
+            params,
+        };
+        Self::assemble(ctx, views, config, state)
+    }
+
+    /// Everything but the optimisation state, which `state` brings (fresh or restored).
+    fn assemble(
+        ctx: &'c GpuContext,
+        views: &[TrainView],
+        config: TrainConfig,
+        state: Resumed,
+    ) -> Result<Self, TrainError> {
+        let (w, h) = (views[0].camera.width, views[0].camera.height);
         let cameras: Vec<Camera> = views.iter().map(|v| v.camera).collect();
         let extent = scene_extent(&cameras)?;
-        let params = ParamBuffers::upload(ctx, &[init])?;
         let targets = views
             .iter()
             .map(|v| {
@@ -133,17 +198,23 @@ impl<'c> Trainer<'c> {
             sh_adam: ShAdam::new(ctx),
             targets,
             v_depth: ctx.storage("v_depth", u64::from(w * h) * 4),
-            moments: Moments::new(ctx, &params),
-            stats: GradStats::new(ctx, params.num_gaussians),
-            // Decorrelated from the view order, which uses the seed as is.
-            rng: SplitMix64::new(config.seed ^ 0xD3A5_17F0_0000_0001),
-            params: Some(params),
-            order: ViewOrder::new(views.len(), config.seed),
+            moments: state.moments,
+            stats: state.stats,
+            rng: state.rng,
+            params: Some(state.params),
+            order: state.order,
             cameras,
             extent,
-            iteration: 0,
+            iteration: state.iteration,
+            profiling: false,
             config,
         })
+    }
+
+    /// Time every phase of the following steps (`StepStats::phases`); costs a GPU wait per
+    /// phase, so only benchmarks turn it on.
+    pub fn set_profiling(&mut self, on: bool) {
+        self.profiling = on;
     }
 
     pub fn config(&self) -> &TrainConfig {
@@ -171,6 +242,7 @@ impl<'c> Trainer<'c> {
     /// One iteration: raise the SH degree if due, pick the next view, optimise on it.
     pub fn step(&mut self) -> Result<StepStats, TrainError> {
         let it = self.iteration + 1;
+        let mut watch = Stopwatch::new(self.profiling);
         let degree = self.config.sh_degree_at(it);
         if degree > self.sh_degree() {
             self.raise_sh_degree(degree)?;
@@ -185,29 +257,43 @@ impl<'c> Trainer<'c> {
             densify: d.as_ref().is_some_and(|d| d.densifies_at(it)),
             reset_opacity: d.as_ref().is_some_and(|d| d.resets_opacity_at(it)),
         };
-        let batch = self.batch_for(self.cameras[view])?;
-        let result = self.optimise(&batch, view, it, plan);
+        let background = self.background_at(it);
+        let batch = self.batch_for(self.cameras[view], background)?;
+        let result = self.optimise(&batch, view, it, plan, &mut watch);
         self.params = Some(batch.params);
-        let loss = result?;
+        let readings = result?;
         if let Some(d) = d.filter(|_| plan.densify) {
             self.densify_and_prune(&d, it)?;
         }
         if plan.reset_opacity {
             self.reset_opacity()?;
         }
+        watch.times.density += watch.lap(self.ctx)?;
         self.iteration = it;
         Ok(StepStats {
             iteration: it,
             view,
             sh_degree: self.sh_degree(),
             num_gaussians: self.num_gaussians(),
-            loss,
+            loss: readings.loss,
+            psnr: readings.psnr,
+            phases: watch.result(),
         })
+    }
+
+    /// The fixed background, or with `random_background` a colour drawn per iteration from
+    /// the seed and the iteration alone (so a resumed run draws the same ones).
+    fn background_at(&self, it: u32) -> [f32; 3] {
+        if !self.config.random_background {
+            return self.config.background;
+        }
+        let mut rng = SplitMix64::new(self.config.seed ^ 0xB6C0_0000_0000_0000 ^ u64::from(it));
+        std::array::from_fn(|_| rng.next_f64() as f32)
     }
 
     /// Renders the current Gaussians from `camera` over the configured background.
     pub fn render(&mut self, camera: &Camera) -> Result<RenderedImage, TrainError> {
-        let batch = self.batch_for(*camera)?;
+        let batch = self.batch_for(*camera, self.config.background)?;
         let result = self
             .renderer
             .forward(self.ctx, &batch)
@@ -236,11 +322,11 @@ impl<'c> Trainer<'c> {
 
     /// A single-image batch over the parameters. `Batch::new` takes them by value, so they
     /// leave `self` until the caller puts `batch.params` back.
-    fn batch_for(&mut self, camera: Camera) -> Result<Batch, TrainError> {
+    fn batch_for(&mut self, camera: Camera, background: [f32; 3]) -> Result<Batch, TrainError> {
         let params = self.params.take().ok_or(TrainError::Poisoned)?;
         let spec = ImageSpec {
             camera,
-            background: self.config.background,
+            background,
             first: 0,
             count: params.num_gaussians,
         };
@@ -253,7 +339,8 @@ impl<'c> Trainer<'c> {
         view: usize,
         it: u32,
         plan: Plan,
-    ) -> Result<Option<f64>, TrainError> {
+        watch: &mut Stopwatch,
+    ) -> Result<Readings, TrainError> {
         let ctx = self.ctx;
         let c = &self.config;
         let state = self.renderer.forward(ctx, batch)?;
@@ -267,22 +354,31 @@ impl<'c> Trainer<'c> {
             1,
             c.lambda_dssim,
         );
-        let loss = if c.loss_every > 0 && it.is_multiple_of(c.loss_every) {
-            Some(out.read_loss(ctx)?)
+        let readings = if c.loss_every > 0 && it.is_multiple_of(c.loss_every) {
+            Readings {
+                loss: Some(out.read_loss(ctx)?),
+                psnr: Some(self.psnr(&state.rgba, view, (w * h) as usize)?),
+            }
         } else {
-            None
+            Readings {
+                loss: None,
+                psnr: None,
+            }
         };
+        watch.times.forward += watch.lap(ctx)?;
         let grads = self
             .renderer
             .backward(ctx, batch, &state, &out.v_pred, &self.v_depth);
+        watch.times.backward += watch.lap(ctx)?;
         if plan.gather_stats {
             self.stats.accumulate(ctx, &state, &grads, w, h);
         }
+        watch.times.density += watch.lap(ctx)?;
         // INRIA densifies before `optimizer.step()`, and the parameters it replaces have no
         // gradient, so torch skips them: no step at all when densifying, and none for the
         // opacities when resetting them.
         if plan.densify {
-            return Ok(loss);
+            return Ok(readings);
         }
         let (p, g, m) = (&batch.params, &grads.params, &self.moments);
         let lr = AdamConfig::with_lr;
@@ -319,7 +415,22 @@ impl<'c> Trainer<'c> {
             it,
         );
         ctx.queue.submit([enc.finish()]);
-        Ok(loss)
+        watch.times.optimizer += watch.lap(ctx)?;
+        Ok(readings)
+    }
+
+    /// PSNR of the rendered `rgba` against view `view`'s target over `pixels` pixels.
+    fn psnr(&self, rgba: &wgpu::Buffer, view: usize, pixels: usize) -> Result<f64, TrainError> {
+        let pred: Vec<[f32; 4]> = self.ctx.read(rgba, pixels)?;
+        let target: Vec<[f32; 4]> = self.ctx.read(&self.targets[view], pixels)?;
+        let sum: f64 = pred
+            .iter()
+            .zip(&target)
+            .flat_map(|(p, t)| (0..3).map(move |c| f64::from(p[c].clamp(0.0, 1.0) - t[c])))
+            .map(|d| d * d)
+            .sum();
+        let mse = sum / (3 * pixels).max(1) as f64;
+        Ok(10.0 * (1.0 / mse.max(1e-20)).log10())
     }
 
     /// Re-lays the SH buffer and its Adam moments out for `degree`, new coefficients zero.
@@ -348,6 +459,53 @@ impl<'c> Trainer<'c> {
         self.moments.sh = moments;
         Ok(())
     }
+}
+
+/// The optimisation state a trainer starts from: fresh in `new`, a checkpoint in `resume`.
+struct Resumed {
+    params: ParamBuffers,
+    moments: Moments,
+    stats: GradStats,
+    rng: SplitMix64,
+    order: ViewOrder,
+    iteration: u32,
+}
+
+/// Views share one resolution and match their images; the Gaussians fit the SH limit.
+fn check_inputs(
+    init: &GaussianParams,
+    views: &[TrainView],
+    config: &TrainConfig,
+) -> Result<(), TrainError> {
+    let first = views
+        .first()
+        .ok_or_else(|| TrainError::Invalid("no training views".into()))?;
+    let (w, h) = (first.camera.width, first.camera.height);
+    for (i, v) in views.iter().enumerate() {
+        if (v.camera.width, v.camera.height) != (w, h) {
+            return Err(TrainError::Invalid(format!(
+                "view {i} is {}×{}, view 0 is {w}×{h}",
+                v.camera.width, v.camera.height
+            )));
+        }
+        if v.image.len() != (w * h) as usize {
+            return Err(TrainError::Invalid(format!(
+                "view {i} has {} pixels, its camera {}",
+                v.image.len(),
+                w * h
+            )));
+        }
+    }
+    if config.max_sh_degree > MAX_SH_DEGREE || init.sh_degree > config.max_sh_degree {
+        return Err(TrainError::Invalid(format!(
+            "SH degree {} / max {} (engine max {MAX_SH_DEGREE})",
+            init.sh_degree, config.max_sh_degree
+        )));
+    }
+    if init.is_empty() {
+        return Err(TrainError::Invalid("no Gaussians to train".into()));
+    }
+    Ok(())
 }
 
 /// What an iteration does besides the optimiser step (INRIA's schedule, see `DensifyConfig`).

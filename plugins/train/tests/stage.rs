@@ -93,7 +93,7 @@ fn train_stage_writes_gaussians_log_and_scene() {
         losses.last() < losses.first(),
         "loss did not fall: {losses:?}"
     );
-    for key in ["iteration", "gaussians", "elapsed_s", "it_per_s"] {
+    for key in ["iteration", "psnr", "gaussians", "elapsed_s", "it_per_s"] {
         assert!(lines[0].get(key).is_some(), "log line lacks {key}");
     }
     // serde_json's default float parser may be 1 ulp off, so compare with a tolerance.
@@ -152,4 +152,86 @@ fn cocog_method_and_missing_points_are_clear_errors() {
     .unwrap_err();
     assert!(matches!(err, StageError::Input(_)), "{err:?}");
     assert!(err.to_string().contains("`points`"), "{err}");
+}
+
+/// Cancels once training progress reaches `at`, like a Ctrl-C mid-run.
+struct CancelAt {
+    at: u64,
+    reached: std::sync::atomic::AtomicBool,
+}
+
+impl cocog_pipeline::Context for CancelAt {
+    fn log(&self, _: cocog_pipeline::LogLevel, message: &str) {
+        eprintln!("{message}");
+    }
+
+    fn progress(&self, task: &str, done: u64, _: u64) {
+        if task == "train" && done >= self.at {
+            self.reached
+                .store(true, std::sync::atomic::Ordering::Relaxed);
+        }
+    }
+
+    fn cancelled(&self) -> bool {
+        self.reached.load(std::sync::atomic::Ordering::Relaxed)
+    }
+}
+
+#[test]
+fn an_interrupted_run_leaves_a_checkpoint_that_resumes_to_the_end() {
+    if !gpu_available() {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let scene_dir = ingested(tmp.path());
+    let train = stage(cocog_train::stages(), "train");
+    let ckpt = tmp.path().join("run.checkpoint");
+    let options = json!({
+        "iterations": 60, "seed": 2, "sh_degree": 1, "random_background": true,
+        "checkpoint_dir": ckpt.display().to_string(), "checkpoint_every": 0,
+    });
+    let given = options.as_object().cloned().unwrap();
+    let opts = Options::validate("train", &train.info().options, &given).unwrap();
+    let out = tmp.path().join("run");
+    std::fs::create_dir_all(&out).unwrap();
+    let req = StageRequest {
+        input: scene_dir.clone(),
+        output: out,
+        options: opts,
+    };
+    let ctx = CancelAt {
+        at: 30,
+        reached: Default::default(),
+    };
+    let err = train.run(&req, &ctx).unwrap_err();
+    assert!(matches!(err, StageError::Cancelled), "{err:?}");
+    let saved = cocog_train::TrainState::load(&ckpt).unwrap();
+    assert_eq!(saved.iteration, 30);
+
+    let mut resumed = options.clone();
+    resumed["resume"] = json!(ckpt.display().to_string());
+    let done = tmp.path().join("done");
+    let summary = run(train.as_ref(), &scene_dir, &done, resumed).unwrap();
+    assert_eq!(summary["resumed_from"], 30);
+    assert_eq!(summary["iterations"], 60);
+    assert!(
+        !ckpt.exists(),
+        "the in-progress checkpoint is removed on success"
+    );
+    let last = cocog_train::TrainState::load(&done).unwrap();
+    assert_eq!(last.iteration, 60);
+    let splats = cocog_formats::ply::read_splats(&done.join("gaussians.ply")).unwrap();
+    assert_eq!(splats.opacities.len(), last.params.len());
+
+    // A different image size or a finished run cannot be continued.
+    for (key, value, expect) in [
+        ("downscale", json!(2), "downscale"),
+        ("iterations", json!(60), "already at iteration 60"),
+    ] {
+        let mut o = options.clone();
+        o["resume"] = json!(done.display().to_string());
+        o[key] = value;
+        let err = run(train.as_ref(), &scene_dir, &tmp.path().join("x"), o).unwrap_err();
+        assert!(err.to_string().contains(expect), "{err}");
+    }
 }

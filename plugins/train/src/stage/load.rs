@@ -4,9 +4,9 @@ use std::path::Path;
 
 use cocog_engine::{Camera, GaussianParams};
 use cocog_formats::images::{downscaled_size, load_rgb, write_downscaled};
-use cocog_pipeline::{Context, Scene, Split, StageError};
+use cocog_pipeline::{Context, Scene, Split, StageError, StageRequest};
 
-use crate::{TrainView, init_from_points};
+use crate::{TrainConfig, TrainView, init_from_points};
 
 /// Reads the scene's point cloud (the `points` field of scene.json) and initialises Gaussians.
 pub fn initial_gaussians(scene: &Scene, input: &Path) -> Result<GaussianParams, StageError> {
@@ -34,6 +34,32 @@ pub fn initial_gaussians(scene: &Scene, input: &Path) -> Result<GaussianParams, 
         .collect();
     init_from_points(&positions, &colors)
         .map_err(|e| StageError::Input(format!("{}: {e}", path.display())))
+}
+
+/// `train_views` with its scratch folder inside the output, removed before returning.
+pub fn train_views_scratch(
+    scene: &Scene,
+    req: &StageRequest,
+    downscale: u32,
+    config: &TrainConfig,
+    ctx: &dyn Context,
+) -> Result<Vec<TrainView>, StageError> {
+    let scratch = req.output.join(".downscaled");
+    if downscale > 1 {
+        std::fs::create_dir_all(&scratch).map_err(|e| StageError::io(&scratch, e))?;
+    }
+    let views = train_views(
+        scene,
+        &req.input,
+        downscale,
+        config.background,
+        &scratch,
+        ctx,
+    );
+    if downscale > 1 {
+        std::fs::remove_dir_all(&scratch).map_err(|e| StageError::io(&scratch, e))?;
+    }
+    views
 }
 
 /// Loads every train-split view, shrunk by `downscale` with intrinsics scaled to match.

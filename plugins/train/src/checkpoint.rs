@@ -1,0 +1,323 @@
+//! Everything a run needs to continue bit-for-bit where it stopped, and its on-disk form.
+//!
+//! One safetensors file: every GPU buffer of the run as an f32 tensor, and the scalars (step,
+//! generator states, the view stack) in the header's string metadata. safetensors because
+//! the parameters and moments are large flat f32 arrays and other tools (Python's
+//! `safetensors`, numpy) read it without cocog.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use cocog_engine::GaussianParams;
+use safetensors::{Dtype, SafeTensors, tensor::TensorView};
+
+/// File name inside a checkpoint directory.
+pub const CHECKPOINT_FILE: &str = "state.safetensors";
+const FORMAT: &str = "cocog.checkpoint";
+const VERSION: &str = "1";
+
+/// Adam's first and second moments of one parameter group.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MomentState {
+    pub m: Vec<f32>,
+    pub v: Vec<f32>,
+}
+
+/// A trainer's complete state between two iterations.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrainState {
+    /// Iterations completed.
+    pub iteration: u32,
+    /// Train views of the run; a resume must train on the same list.
+    pub views: u32,
+    /// Image shrink factor of the run, checked on resume (the state is resolution-specific
+    /// only through the learned scales, but mixing would silently change the experiment).
+    pub downscale: u32,
+    pub params: GaussianParams,
+    /// Groups in parameter order: means, log-scales, quaternions, opacity logits, SH.
+    pub moments: [MomentState; 5],
+    /// Densification statistics: Σ‖∇mean2d‖ and visible count per Gaussian.
+    pub grad_accum: Vec<f32>,
+    pub grad_denom: Vec<f32>,
+    /// Generator state of the split sampler.
+    pub rng: u64,
+    /// The view order: its generator state and the views left in this epoch.
+    pub order_rng: u64,
+    pub order_stack: Vec<u32>,
+}
+
+const GROUPS: [&str; 5] = ["means", "log_scales", "quats", "opacity_logits", "sh"];
+
+#[derive(Debug, thiserror::Error)]
+pub enum CheckpointError {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{path}: not a cocog checkpoint: {why}")]
+    Format { path: PathBuf, why: String },
+}
+
+fn bytes(v: &[f32]) -> &[u8] {
+    bytemuck::cast_slice(v)
+}
+
+impl TrainState {
+    /// Writes `dir/state.safetensors` (the caller makes `dir` appear atomically).
+    pub fn save(&self, dir: &Path) -> Result<PathBuf, CheckpointError> {
+        let path = dir.join(CHECKPOINT_FILE);
+        let io = |source| CheckpointError::Io {
+            path: path.clone(),
+            source,
+        };
+        std::fs::create_dir_all(dir).map_err(io)?;
+        let p = &self.params;
+        let flat = |v: &[[f32; 3]]| v.as_flattened().to_vec();
+        let mut tensors: Vec<(String, Vec<f32>)> = vec![
+            ("params.means".into(), flat(&p.means)),
+            ("params.log_scales".into(), flat(&p.log_scales)),
+            ("params.quats".into(), p.quats.as_flattened().to_vec()),
+            ("params.opacity_logits".into(), p.opacity_logits.clone()),
+            ("params.sh".into(), p.sh.clone()),
+            ("stats.grad_accum".into(), self.grad_accum.clone()),
+            ("stats.grad_denom".into(), self.grad_denom.clone()),
+        ];
+        for (name, m) in GROUPS.iter().zip(&self.moments) {
+            tensors.push((format!("adam.{name}.m"), m.m.clone()));
+            tensors.push((format!("adam.{name}.v"), m.v.clone()));
+        }
+        let views: Vec<(String, TensorView<'_>)> = tensors
+            .iter()
+            .map(|(name, data)| {
+                let view = TensorView::new(Dtype::F32, vec![data.len()], bytes(data))
+                    .expect("shape is the data's own length");
+                (name.clone(), view)
+            })
+            .collect();
+        let stack: Vec<String> = self.order_stack.iter().map(u32::to_string).collect();
+        let meta = HashMap::from([
+            ("format".to_owned(), FORMAT.to_owned()),
+            ("version".to_owned(), VERSION.to_owned()),
+            ("iteration".to_owned(), self.iteration.to_string()),
+            ("views".to_owned(), self.views.to_string()),
+            ("downscale".to_owned(), self.downscale.to_string()),
+            ("sh_degree".to_owned(), p.sh_degree.to_string()),
+            ("gaussians".to_owned(), p.len().to_string()),
+            ("rng".to_owned(), self.rng.to_string()),
+            ("order_rng".to_owned(), self.order_rng.to_string()),
+            ("order_stack".to_owned(), stack.join(",")),
+        ]);
+        let tmp = dir.join(format!(".{CHECKPOINT_FILE}.tmp"));
+        safetensors::serialize_to_file(views, Some(meta), &tmp).map_err(|e| {
+            CheckpointError::Io {
+                path: tmp.clone(),
+                source: std::io::Error::other(e),
+            }
+        })?;
+        std::fs::rename(&tmp, &path).map_err(io)?;
+        Ok(path)
+    }
+
+    /// Reads a checkpoint from `path`: a checkpoint directory, a train output holding
+    /// `checkpoint/`, or the state file itself.
+    pub fn load(path: &Path) -> Result<Self, CheckpointError> {
+        let file = locate(path);
+        let data = std::fs::read(&file).map_err(|source| CheckpointError::Io {
+            path: file.clone(),
+            source,
+        })?;
+        Reader::new(&file, &data)?.state()
+    }
+}
+
+/// `path` itself if it is a file, else the state file in it or in its `checkpoint/`.
+fn locate(path: &Path) -> PathBuf {
+    if path.is_file() {
+        return path.to_path_buf();
+    }
+    let nested = path.join("checkpoint").join(CHECKPOINT_FILE);
+    if nested.is_file() {
+        nested
+    } else {
+        path.join(CHECKPOINT_FILE)
+    }
+}
+
+struct Reader<'a> {
+    path: &'a Path,
+    st: SafeTensors<'a>,
+    meta: HashMap<String, String>,
+}
+
+impl<'a> Reader<'a> {
+    fn new(path: &'a Path, data: &'a [u8]) -> Result<Self, CheckpointError> {
+        let fail = |why: String| CheckpointError::Format {
+            path: path.to_path_buf(),
+            why,
+        };
+        let st = SafeTensors::deserialize(data).map_err(|e| fail(e.to_string()))?;
+        let (_, header) = SafeTensors::read_metadata(data).map_err(|e| fail(e.to_string()))?;
+        let meta = header.metadata().clone().unwrap_or_default();
+        let r = Self { path, st, meta };
+        if r.text("format")? != FORMAT {
+            return Err(r.fail("metadata `format` is not cocog.checkpoint".into()));
+        }
+        let version = r.text("version")?;
+        if version != VERSION {
+            return Err(r.fail(format!(
+                "checkpoint version {version}; this cocog reads version {VERSION}"
+            )));
+        }
+        Ok(r)
+    }
+
+    fn fail(&self, why: String) -> CheckpointError {
+        CheckpointError::Format {
+            path: self.path.to_path_buf(),
+            why,
+        }
+    }
+
+    fn text(&self, key: &str) -> Result<&str, CheckpointError> {
+        self.meta
+            .get(key)
+            .map(String::as_str)
+            .ok_or_else(|| self.fail(format!("metadata has no `{key}`")))
+    }
+
+    fn number<T: std::str::FromStr>(&self, key: &str) -> Result<T, CheckpointError> {
+        let text = self.text(key)?;
+        text.parse()
+            .map_err(|_| self.fail(format!("metadata `{key}` = {text:?} is not a number")))
+    }
+
+    /// Tensor `name`, which must hold `per` × `rows` floats.
+    fn floats(&self, name: &str, rows: usize, per: usize) -> Result<Vec<f32>, CheckpointError> {
+        let t = self
+            .st
+            .tensor(name)
+            .map_err(|_| self.fail(format!("tensor `{name}` is missing")))?;
+        if t.dtype() != Dtype::F32 || t.data().len() != rows * per * 4 {
+            return Err(self.fail(format!(
+                "tensor `{name}` should be {} f32 values ({rows} Gaussians × {per}), found {:?} of {} bytes",
+                rows * per,
+                t.dtype(),
+                t.data().len()
+            )));
+        }
+        Ok(bytemuck::pod_collect_to_vec(t.data()))
+    }
+
+    fn state(&self) -> Result<TrainState, CheckpointError> {
+        let n: usize = self.number("gaussians")?;
+        let sh_degree: u32 = self.number("sh_degree")?;
+        if sh_degree > cocog_engine::MAX_SH_DEGREE {
+            return Err(self.fail(format!("metadata `sh_degree` = {sh_degree} is above 3")));
+        }
+        let sh = 3 * cocog_engine::sh_coeffs_per_channel(sh_degree);
+        let triples = |v: Vec<f32>| v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+        let params = GaussianParams {
+            sh_degree,
+            means: triples(self.floats("params.means", n, 3)?),
+            log_scales: triples(self.floats("params.log_scales", n, 3)?),
+            quats: self
+                .floats("params.quats", n, 4)?
+                .chunks_exact(4)
+                .map(|c| [c[0], c[1], c[2], c[3]])
+                .collect(),
+            opacity_logits: self.floats("params.opacity_logits", n, 1)?,
+            sh: self.floats("params.sh", n, sh)?,
+        };
+        let widths = [3, 3, 4, 1, sh];
+        let mut moments: [MomentState; 5] = Default::default();
+        for ((name, per), slot) in GROUPS.iter().zip(widths).zip(&mut moments) {
+            slot.m = self.floats(&format!("adam.{name}.m"), n, per)?;
+            slot.v = self.floats(&format!("adam.{name}.v"), n, per)?;
+        }
+        let stack = self.text("order_stack")?;
+        let order_stack = stack
+            .split(',')
+            .filter(|s| !s.is_empty())
+            .map(|s| s.parse::<u32>())
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(|_| self.fail(format!("metadata `order_stack` = {stack:?}")))?;
+        Ok(TrainState {
+            iteration: self.number("iteration")?,
+            views: self.number("views")?,
+            downscale: self.number("downscale")?,
+            params,
+            moments,
+            grad_accum: self.floats("stats.grad_accum", n, 1)?,
+            grad_denom: self.floats("stats.grad_denom", n, 1)?,
+            rng: self.number("rng")?,
+            order_rng: self.number("order_rng")?,
+            order_stack,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn state() -> TrainState {
+        let n = 3;
+        let sh = 12;
+        let seq = |len: usize, at: f32| (0..len).map(|i| at + i as f32 * 0.5).collect::<Vec<_>>();
+        TrainState {
+            iteration: 1234,
+            views: 21,
+            downscale: 4,
+            params: GaussianParams {
+                sh_degree: 1,
+                means: vec![[1.0, 2.0, 3.0]; n],
+                log_scales: vec![[-4.0, -3.5, -3.0]; n],
+                quats: vec![[1.0, 0.0, 0.5, 0.0]; n],
+                opacity_logits: seq(n, -1.0),
+                sh: seq(n * sh, 0.25),
+            },
+            moments: std::array::from_fn(|g| {
+                let per = [3, 3, 4, 1, sh][g];
+                MomentState {
+                    m: seq(n * per, g as f32),
+                    v: seq(n * per, 10.0 + g as f32),
+                }
+            }),
+            grad_accum: seq(n, 7.0),
+            grad_denom: seq(n, 2.0),
+            rng: u64::MAX - 5,
+            order_rng: 0xDEAD_BEEF_0000_0001,
+            order_stack: vec![4, 0, 17],
+        }
+    }
+
+    #[test]
+    fn a_saved_state_loads_back_identically_from_any_of_its_paths() {
+        let dir = tempfile::tempdir().unwrap();
+        let ckpt = dir.path().join("checkpoint");
+        let s = state();
+        let file = s.save(&ckpt).unwrap();
+        assert_eq!(TrainState::load(&file).unwrap(), s);
+        assert_eq!(TrainState::load(&ckpt).unwrap(), s);
+        assert_eq!(TrainState::load(dir.path()).unwrap(), s);
+    }
+
+    #[test]
+    fn a_wrong_file_is_named_with_what_is_wrong() {
+        let dir = tempfile::tempdir().unwrap();
+        let missing = TrainState::load(dir.path()).unwrap_err().to_string();
+        assert!(missing.contains(CHECKPOINT_FILE), "{missing}");
+        let file = dir.path().join(CHECKPOINT_FILE);
+        std::fs::write(&file, b"not safetensors").unwrap();
+        let bad = TrainState::load(&file).unwrap_err().to_string();
+        assert!(bad.contains("not a cocog checkpoint"), "{bad}");
+        // A valid file whose SH tensor disagrees with the Gaussian count.
+        let mut s = state();
+        s.params.sh.pop();
+        s.save(dir.path()).unwrap();
+        let short = TrainState::load(&file).unwrap_err().to_string();
+        assert!(short.contains("params.sh"), "{short}");
+    }
+}
