@@ -169,9 +169,24 @@ pub struct TrainArgs {
     /// Train on images downscaled by N.
     #[arg(long)]
     pub downscale: Option<u32>,
-    /// Random seed.
+    /// Random seed (view order, splits, random backgrounds).
     #[arg(long)]
     pub seed: Option<u64>,
+    /// Largest spherical-harmonics degree, 0 to 3. Default 3.
+    #[arg(long = "sh-degree")]
+    pub sh_degree: Option<u64>,
+    /// Composite each training render over a random colour, which keeps floaters from
+    /// hiding behind a matching background.
+    #[arg(long = "random-background")]
+    pub random_background: bool,
+    /// Continue an earlier run: a train output (uses its checkpoint/) or the OUTPUT.checkpoint
+    /// folder an interrupted run left. Give the same --downscale; --iterations is the total.
+    #[arg(long)]
+    pub resume: Option<PathBuf>,
+    /// Save OUTPUT.checkpoint every N iterations while training (0: only on Ctrl-C).
+    /// Default 1000.
+    #[arg(long = "checkpoint-every")]
+    pub checkpoint_every: Option<u64>,
 }
 
 #[derive(Clone, Copy, ValueEnum)]

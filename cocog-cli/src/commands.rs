@@ -75,9 +75,18 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
                 Method::Cocog => "cocog",
                 Method::Gs3d => "3dgs",
             });
+            // Beside the output, not in it: the runner discards a failed run's staging folder,
+            // and the checkpoint is what lets an interrupted run continue.
+            let mut checkpoint_dir = a.io.output.clone().into_os_string();
+            checkpoint_dir.push(".checkpoint");
             let o = options! {
                 "method" => method, "iterations" => a.iterations,
                 "coc_gaussians" => a.coc_gaussians, "downscale" => a.downscale, "seed" => a.seed,
+                "sh_degree" => a.sh_degree,
+                "random_background" => a.random_background.then_some(true),
+                "resume" => a.resume.as_ref().map(|p| p.display().to_string()),
+                "checkpoint_every" => a.checkpoint_every,
+                "checkpoint_dir" => Some(std::path::PathBuf::from(checkpoint_dir).display().to_string()),
             };
             run("train", &a.io.scene, &a.io.output, o)
         }
