@@ -36,6 +36,10 @@ pub struct Global {
     /// repeatable, e.g. --use train=./libmy_trainer.so
     #[arg(long = "use", global = true, value_name = "STAGE=PLUGIN")]
     pub use_plugin: Vec<String>,
+    /// GPU to use: any adapter whose name contains this text, e.g. "NVIDIA" or "llvmpipe".
+    /// Default: the most capable one (discrete > integrated > software). Same as COCOG_ADAPTER.
+    #[arg(long, global = true, value_name = "NAME")]
+    pub adapter: Option<String>,
     /// Replace the output if it already exists.
     #[arg(long, global = true)]
     pub force: bool,
@@ -76,6 +80,9 @@ pub enum Command {
     Plugins,
     /// Run the main job end to end on a small scene that ships with cocog.
     Demo(DemoArgs),
+    /// Measure training speed on this machine: it/s, ms per iteration split into forward /
+    /// backward / optimizer / density control, Gaussian count, peak GPU and host memory.
+    Bench(BenchArgs),
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -297,4 +304,26 @@ pub struct DemoArgs {
     /// Where to put the demo's dataset and scenes.
     #[arg(short, long, default_value = "cocog-demo")]
     pub output: PathBuf,
+}
+
+#[derive(Args)]
+pub struct BenchArgs {
+    /// An ingested scene directory (with points), e.g. from `cocog ingest`.
+    pub scene: PathBuf,
+    /// Train on images downscaled by N. Default 1.
+    #[arg(long, default_value_t = 1)]
+    pub downscale: u32,
+    /// Timed iterations: this many unprofiled (throughput), then as many profiled (split).
+    #[arg(long, default_value_t = 100)]
+    pub iterations: u32,
+    /// Untimed iterations first (shader compilation, first allocations).
+    #[arg(long, default_value_t = 10)]
+    pub warmup: u32,
+    /// Start from a training checkpoint (a train output or OUTPUT.checkpoint) to measure at a
+    /// realistic Gaussian count instead of the SfM points.
+    #[arg(long)]
+    pub resume: Option<PathBuf>,
+    /// Largest SH degree. Default 3 (reached only after 3000 iterations, or from --resume).
+    #[arg(long = "sh-degree", default_value_t = 3)]
+    pub sh_degree: u32,
 }

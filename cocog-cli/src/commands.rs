@@ -145,7 +145,32 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
         }
         Command::Plugins => plugins::list(&registry, g.json),
         Command::Demo(a) => demo::run(&registry, a, g, ctx),
+        Command::Bench(a) => bench(a, g, ctx),
     }
+}
+
+fn bench(a: &crate::cli::BenchArgs, g: &Global, ctx: &dyn Context) -> Result<()> {
+    if a.iterations == 0 || a.downscale == 0 || a.sh_degree > 3 {
+        return Err(UsageError(
+            "bench needs --iterations ≥ 1, --downscale ≥ 1 and --sh-degree 0..=3".to_owned(),
+        )
+        .into());
+    }
+    let opts = cocog_train::BenchOptions {
+        downscale: a.downscale,
+        iterations: a.iterations,
+        warmup: a.warmup,
+        resume: a.resume.clone(),
+        max_sh_degree: a.sh_degree,
+    };
+    let report = cocog_train::run_bench(&a.scene, &opts, ctx)
+        .with_context(|| format!("benchmarking {}", a.scene.display()))?;
+    if g.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print!("{}", report.table());
+    }
+    Ok(())
 }
 
 fn build_registry(g: &Global, ctx: &dyn Context, listing: bool) -> Result<Registry> {

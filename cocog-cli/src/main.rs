@@ -30,6 +30,12 @@ pub mod exit {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    if let Some(name) = &cli.global.adapter {
+        // The engine reads COCOG_ADAPTER where it opens the device, in the binary's stages
+        // and in plugins alike, so the flag travels as that variable.
+        // SAFETY: nothing else runs yet (no threads: the Ctrl-C handler starts below).
+        unsafe { std::env::set_var("COCOG_ADAPTER", name) };
+    }
     let level = if cli.global.quiet {
         LogLevel::Warn
     } else if cli.global.verbose {

@@ -17,6 +17,28 @@ fn demo_generates_its_dataset_and_runs_the_available_stages() {
     let last = stdout(&out);
     assert!(last.trim().ends_with("scene.ply"), "{last}");
     assert!(root.join("3-train/gaussians.ply").exists());
+    assert!(root.join("3-train/checkpoint/state.safetensors").exists());
+
+    // The benchmark runs on the demo's scene and reports every phase.
+    let ingested = root.join("1-ingest");
+    let bench = cocog(&[
+        "bench",
+        path_str(&ingested),
+        "--iterations",
+        "3",
+        "--warmup",
+        "1",
+        "--json",
+    ]);
+    assert!(bench.status.success(), "{}", stderr(&bench));
+    let report: serde_json::Value = serde_json::from_str(&stdout(&bench)).expect("bench JSON");
+    assert!(report["gaussians_start"].as_u64().unwrap() > 0, "{report}");
+    assert!(report["peak_gpu_bytes"].as_u64().unwrap() > 0, "{report}");
+    for phase in ["forward", "backward", "optimizer", "density"] {
+        let ms = report["phases_ms"][phase].as_f64().unwrap();
+        assert!(ms.is_finite() && ms >= 0.0, "{phase}: {report}");
+    }
+    assert!(report["phases_ms"]["forward"].as_f64().unwrap() > 0.0);
     // A rerun replaces the demo's own directory without --force...
     let again = cocog(&["demo", "-o", path_str(&root)]);
     assert!(again.status.success(), "{}", stderr(&again));

@@ -11,6 +11,7 @@
 //! The GPU backward accumulates gradients with float atomics, whose summation order varies,
 //! so parameters agree between runs only to rounding.
 
+mod bench;
 mod checkpoint;
 mod config;
 mod densify;
@@ -23,6 +24,7 @@ mod stage;
 mod stats;
 mod trainer;
 
+pub use bench::{BenchOptions, BenchReport, PhaseMs, run_bench};
 pub use checkpoint::{CHECKPOINT_FILE, CheckpointError, MomentState, TrainState};
 pub use config::TrainConfig;
 pub use densify::{DensifyConfig, DensifyPlan, Origin, apply_plan, gather_rows, plan_densify};

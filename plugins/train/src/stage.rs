@@ -1,6 +1,6 @@
 //! The `train` pipeline stage: scene + points.ply in, scene + gaussians.ply out.
 
-mod load;
+pub(crate) mod load;
 mod session;
 
 use std::path::PathBuf;

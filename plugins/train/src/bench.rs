@@ -1,0 +1,222 @@
+//! `cocog bench`: where a training iteration's time goes on this machine's adapter.
+//!
+//! Trains a scene for a while and reports real throughput (unprofiled iterations) and the
+//! split into forward / backward / optimizer / density control (profiled iterations, which
+//! wait for the GPU at each phase boundary), with the Gaussian count and peak memory.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use cocog_engine::GpuContext;
+use cocog_pipeline::{Context, Scene, StageError};
+use serde::Serialize;
+
+use crate::stage::load;
+use crate::{DensifyConfig, PhaseTimes, TrainConfig, TrainState, Trainer};
+
+/// What to measure.
+#[derive(Clone, Debug)]
+pub struct BenchOptions {
+    pub downscale: u32,
+    /// Unprofiled iterations, then as many profiled ones.
+    pub iterations: u32,
+    /// Iterations run first and not counted (pipeline compilation, first allocations).
+    pub warmup: u32,
+    /// Start from a checkpoint (realistic Gaussian counts) instead of the scene's points.
+    pub resume: Option<PathBuf>,
+    pub max_sh_degree: u32,
+}
+
+/// Milliseconds per iteration of each phase.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct PhaseMs {
+    pub forward: f64,
+    pub backward: f64,
+    pub optimizer: f64,
+    pub density: f64,
+    pub total: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchReport {
+    pub adapter: String,
+    /// Which gradient-accumulation path the backward used.
+    pub float_atomics: bool,
+    pub subgroups: bool,
+    pub width: u32,
+    pub height: u32,
+    pub views: usize,
+    pub start_iteration: u32,
+    pub gaussians_start: u32,
+    pub gaussians_end: u32,
+    pub iterations: u32,
+    pub it_per_s: f64,
+    pub ms_per_iteration: f64,
+    /// Profiled: each phase waited for, so `total` exceeds `ms_per_iteration`.
+    pub phases_ms: PhaseMs,
+    pub peak_gpu_bytes: u64,
+    /// Peak resident memory of the whole process (Linux VmHWM), when known.
+    pub peak_host_bytes: Option<u64>,
+}
+
+fn per_iteration(t: &PhaseTimes, n: u32) -> PhaseMs {
+    let ms = |s: f64| 1e3 * s / f64::from(n.max(1));
+    PhaseMs {
+        forward: ms(t.forward),
+        backward: ms(t.backward),
+        optimizer: ms(t.optimizer),
+        density: ms(t.density),
+        total: ms(t.total()),
+    }
+}
+
+/// Peak resident set size from /proc (None elsewhere).
+fn peak_host_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+/// Runs the benchmark on the scene directory `scene_dir`.
+pub fn run_bench(
+    scene_dir: &Path,
+    opts: &BenchOptions,
+    ctx: &dyn Context,
+) -> Result<BenchReport, StageError> {
+    let mut scene = Scene::load(scene_dir)?;
+    scene.rebase(scene_dir)?;
+    let resume = match &opts.resume {
+        Some(p) => Some(TrainState::load(p).map_err(|e| StageError::Input(e.to_string()))?),
+        None => None,
+    };
+    let start = resume.as_ref().map_or(0, |s| s.iteration);
+    let total = opts.warmup + 2 * opts.iterations;
+    let config = TrainConfig {
+        iterations: start + total,
+        max_sh_degree: opts.max_sh_degree,
+        loss_every: 0,
+        // Density control from the first iteration, at its usual interval, so a short run
+        // from the SfM points measures it too.
+        densify: Some(DensifyConfig {
+            from_iter: start.min(500),
+            ..DensifyConfig::default()
+        }),
+        ..TrainConfig::default()
+    };
+    let scratch = tempfile_dir(scene_dir)?;
+    let views = load::train_views(
+        &scene,
+        scene_dir,
+        opts.downscale,
+        config.background,
+        scratch.path(),
+        ctx,
+    )?;
+    drop(scratch);
+    let gpu = GpuContext::new().map_err(StageError::other)?;
+    let mut trainer = match &resume {
+        Some(state) => Trainer::resume(&gpu, state, &views, config),
+        None => {
+            let init = load::initial_gaussians(&scene, scene_dir)?;
+            Trainer::new(&gpu, &init, &views, config)
+        }
+    }
+    .map_err(StageError::other)?;
+    let gaussians_start = trainer.num_gaussians();
+    let mut step = |done: u32| -> Result<_, StageError> {
+        ctx.check_cancelled()?;
+        ctx.progress("bench", u64::from(done), u64::from(total));
+        trainer.step().map_err(StageError::other)
+    };
+    for i in 0..opts.warmup {
+        step(i)?;
+    }
+    gpu.wait().map_err(StageError::other)?;
+    gpu.memory.reset_peak();
+    let clock = Instant::now();
+    for i in 0..opts.iterations {
+        step(opts.warmup + i)?;
+    }
+    gpu.wait().map_err(StageError::other)?;
+    let seconds = clock.elapsed().as_secs_f64();
+    trainer.set_profiling(true);
+    let mut phases = PhaseTimes::default();
+    for i in 0..opts.iterations {
+        let stats = trainer.step().map_err(StageError::other)?;
+        ctx.progress(
+            "bench",
+            u64::from(opts.warmup + opts.iterations + i + 1),
+            u64::from(total),
+        );
+        phases.add(&stats.phases.unwrap_or_default());
+    }
+    let n = opts.iterations.max(1);
+    Ok(BenchReport {
+        adapter: gpu.adapter_name(),
+        float_atomics: gpu.float_atomics,
+        subgroups: gpu.subgroups,
+        width: views[0].camera.width,
+        height: views[0].camera.height,
+        views: views.len(),
+        start_iteration: start,
+        gaussians_start,
+        gaussians_end: trainer.num_gaussians(),
+        iterations: opts.iterations,
+        it_per_s: f64::from(n) / seconds.max(1e-9),
+        ms_per_iteration: 1e3 * seconds / f64::from(n),
+        phases_ms: per_iteration(&phases, n),
+        peak_gpu_bytes: gpu.memory.peak_bytes(),
+        peak_host_bytes: peak_host_bytes(),
+    })
+}
+
+/// A scratch folder for downscaled images, removed on drop.
+fn tempfile_dir(scene_dir: &Path) -> Result<tempfile::TempDir, StageError> {
+    tempfile::Builder::new()
+        .prefix("cocog-bench-")
+        .tempdir()
+        .map_err(|e| StageError::io(scene_dir, e))
+}
+
+impl BenchReport {
+    /// A few aligned lines for a terminal.
+    pub fn table(&self) -> String {
+        let p = &self.phases_ms;
+        let mib = |b: u64| b as f64 / (1024.0 * 1024.0);
+        let host = self
+            .peak_host_bytes
+            .map_or("unknown".to_owned(), |b| format!("{:.0} MiB", mib(b)));
+        format!(
+            "adapter          {} (float atomics: {}, subgroups: {})\n\
+             images           {} views at {}×{}\n\
+             Gaussians        {} → {} (from iteration {})\n\
+             throughput       {:.2} it/s, {:.1} ms/iteration ({} iterations)\n\
+             profiled ms/it   forward {:.1} | backward {:.1} | optimizer {:.1} | density {:.1} | sum {:.1}\n\
+             peak GPU memory  {:.1} MiB (engine buffers)\n\
+             peak host memory {host}\n",
+            self.adapter,
+            yes_no(self.float_atomics),
+            yes_no(self.subgroups),
+            self.views,
+            self.width,
+            self.height,
+            self.gaussians_start,
+            self.gaussians_end,
+            self.start_iteration,
+            self.it_per_s,
+            self.ms_per_iteration,
+            self.iterations,
+            p.forward,
+            p.backward,
+            p.optimizer,
+            p.density,
+            p.total,
+            mib(self.peak_gpu_bytes),
+        )
+    }
+}
+
+fn yes_no(b: bool) -> &'static str {
+    if b { "yes" } else { "no" }
+}
