@@ -17,6 +17,7 @@ fn adam_matches_formula_over_several_steps() {
         beta1: 0.9,
         beta2: 0.999,
         eps: 1e-8,
+        interleaved: None,
     };
     let param = ctx.storage_from("param", &p.iter().map(|&x| x as f32).collect::<Vec<_>>());
     let moments = AdamMoments::new(ctx, n as u32);
@@ -50,5 +51,29 @@ fn adam_matches_formula_over_several_steps() {
     let got_v: Vec<f32> = ctx.read(&moments.v, n).unwrap();
     for i in 0..n {
         assert!((f64::from(got_v[i]) - v[i]).abs() < 1e-6 * v[i].max(1.0));
+    }
+}
+
+#[test]
+fn interleaved_groups_step_at_their_own_rates() {
+    let Some(ctx) = gpu() else { return };
+    // Two Gaussians' SH at degree 1: 3 channels × 4 coefficients, DC first in each block.
+    let n = 24;
+    let grad: Vec<f32> = (0..n)
+        .map(|i| if i % 3 == 0 { -0.5 } else { 0.25 })
+        .collect();
+    let param = ctx.storage_from("param", &vec![1.0f32; n]);
+    let grad_buf = ctx.storage_from("grad", &grad);
+    let moments = AdamMoments::new(ctx, n as u32);
+    let mut enc = ctx.device.create_command_encoder(&Default::default());
+    let config = AdamConfig::with_lr(0.01).interleaved(4, 0.0005);
+    Adam::new(ctx).encode(ctx, &mut enc, &param, &grad_buf, &moments, &config, 1);
+    ctx.queue.submit([enc.finish()]);
+    let out: Vec<f32> = ctx.read(&param, n).unwrap();
+    for (i, (p, g)) in out.iter().zip(&grad).enumerate() {
+        // Adam's first step moves every element by its rate against the gradient's sign.
+        let lr = if i % 4 == 0 { 0.01 } else { 0.0005 };
+        let want = 1.0 - lr * g.signum();
+        assert!((p - want).abs() < 1e-6, "element {i}: {p} vs {want}");
     }
 }

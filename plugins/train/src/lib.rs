@@ -19,7 +19,6 @@ mod error;
 mod init;
 mod kernel;
 mod order;
-mod sh_adam;
 mod stage;
 mod stats;
 mod trainer;

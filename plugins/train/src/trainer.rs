@@ -5,7 +5,6 @@ use cocog_engine::{
     ImageSpec, MAX_SH_DEGREE, ParamBuffers, RenderedImage, Renderer, sh_coeffs_per_channel,
 };
 
-use crate::sh_adam::ShAdam;
 use crate::{GradStats, SplitMix64, TrainConfig, TrainError, ViewOrder, scene_extent};
 
 mod density;
@@ -132,7 +131,6 @@ pub struct Trainer<'c> {
     renderer: Renderer,
     loss: ImageLoss,
     adam: Adam,
-    sh_adam: ShAdam,
     cameras: Vec<Camera>,
     /// Per view, rgba f32 laid out like `ForwardState::rgba` (alpha unused by the loss).
     targets: Vec<GpuBuffer>,
@@ -195,7 +193,6 @@ impl<'c> Trainer<'c> {
             renderer: Renderer::new(ctx),
             loss: ImageLoss::new(ctx),
             adam: Adam::new(ctx),
-            sh_adam: ShAdam::new(ctx),
             targets,
             v_depth: ctx.storage("v_depth", u64::from(w * h) * 4),
             moments: state.moments,
@@ -403,17 +400,9 @@ impl<'c> Trainer<'c> {
                 .encode(ctx, &mut enc, param, grad, moments, &lr(rate), it);
         }
         let coeffs = sh_coeffs_per_channel(p.sh_degree) as u32;
-        self.sh_adam.encode(
-            ctx,
-            &mut enc,
-            &p.sh,
-            &g.sh,
-            &m.sh,
-            coeffs,
-            &lr(c.feature_lr),
-            c.feature_rest_lr(),
-            it,
-        );
+        let sh_lr = lr(c.feature_lr).interleaved(coeffs, c.feature_rest_lr());
+        self.adam
+            .encode(ctx, &mut enc, &p.sh, &g.sh, &m.sh, &sh_lr, it);
         ctx.queue.submit([enc.finish()]);
         watch.times.optimizer += watch.lap(ctx)?;
         Ok(readings)

@@ -14,7 +14,9 @@ struct Params {
     eps: f32,
     bias1: f32,
     bias2: f32,
-    pad: u32,
+    period: u32,
+    lr_rest: f32,
+    pad: [u32; 3],
 }
 
 /// Hyper-parameters of one parameter group.
@@ -24,6 +26,9 @@ pub struct AdamConfig {
     pub beta1: f32,
     pub beta2: f32,
     pub eps: f32,
+    /// Two groups in one buffer: `Some((period, lr_rest))` steps only every `period`-th
+    /// element (from 0) at `lr` and the others at `lr_rest` (SH: DC and higher bands).
+    pub interleaved: Option<(u32, f32)>,
 }
 
 impl AdamConfig {
@@ -34,6 +39,15 @@ impl AdamConfig {
             beta1: 0.9,
             beta2: 0.999,
             eps: 1e-15,
+            interleaved: None,
+        }
+    }
+
+    /// The same with every element not at a multiple of `period` stepping at `lr_rest`.
+    pub fn interleaved(self, period: u32, lr_rest: f32) -> Self {
+        Self {
+            interleaved: Some((period.max(1), lr_rest)),
+            ..self
         }
     }
 }
@@ -80,7 +94,11 @@ impl Adam {
         config: &AdamConfig,
         t: u32,
     ) {
+        if moments.len == 0 {
+            return;
+        }
         let t = i32::try_from(t.max(1)).unwrap_or(i32::MAX);
+        let (period, lr_rest) = config.interleaved.unwrap_or((1, config.lr));
         let params = ctx.uniform(&Params {
             n: moments.len,
             lr: config.lr,
@@ -89,7 +107,9 @@ impl Adam {
             eps: config.eps,
             bias1: 1.0 - config.beta1.powi(t),
             bias2: 1.0 - config.beta2.powi(t),
-            pad: 0,
+            period: period.max(1),
+            lr_rest,
+            pad: [0; 3],
         });
         self.kernel.dispatch_1d(
             ctx,

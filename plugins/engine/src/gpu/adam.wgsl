@@ -1,5 +1,8 @@
 // Adam update of one flat f32 parameter buffer, with bias correction folded into the step
-// (the same arithmetic as torch.optim.Adam, which 3DGS and CoCoGaussian use).
+// (the same arithmetic as torch.optim.Adam, which 3DGS and CoCoGaussian use). One buffer can
+// hold two torch parameter groups interleaved: every `period`-th element (from 0) steps at
+// `lr`, the others at `lr_rest`. The SH buffer needs this: INRIA trains f_dc and f_rest as
+// groups with different rates, and the engine stores them per Gaussian and channel together.
 
 struct Params {
     n: u32,
@@ -10,7 +13,11 @@ struct Params {
     // 1 − β₁ᵗ and 1 − β₂ᵗ
     bias1: f32,
     bias2: f32,
-    pad: u32,
+    period: u32,
+    lr_rest: f32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -25,10 +32,11 @@ fn adam(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     if (i >= params.n) {
         return;
     }
+    let lr = select(params.lr_rest, params.lr, i % params.period == 0u);
     let g = grad[i];
     let m = params.beta1 * m1[i] + (1.0 - params.beta1) * g;
     let v = params.beta2 * m2[i] + (1.0 - params.beta2) * g * g;
     m1[i] = m;
     m2[i] = v;
-    param[i] -= params.lr / params.bias1 * m / (sqrt(v / params.bias2) + params.eps);
+    param[i] -= lr / params.bias1 * m / (sqrt(v / params.bias2) + params.eps);
 }
