@@ -5,14 +5,14 @@
 //! The CLI's `cocog eval --pred DIR --gt DIR` maps to: input = DIR of predictions, option
 //! `gt` = ground-truth DIR. [`format_table`] renders the result for a terminal.
 
-use cocog_metrics::{EvalOptions, LpipsMode, MetricsError, Observer, evaluate_dirs};
+use cocog_metrics::{MetricsError, Observer};
 use cocog_pipeline::{
     Context, OptionKind, OptionSpec, OutputKind, Stage, StageError, StageInfo, StageKind,
     StageRequest,
 };
 use serde_json::Value;
 
-pub use cocog_metrics::format_table;
+pub use cocog_metrics::{EvalOptions, LpipsMode, evaluate_dirs, format_table, write_json_atomic};
 
 /// The stages this crate provides.
 pub fn stages() -> Vec<Box<dyn Stage>> {
@@ -32,27 +32,14 @@ impl Stage for EvalStage {
                           file stem): PSNR, SSIM (Deblur-NeRF and Gaussian-11), LPIPS-Alex; \
                           writes metrics.json"
                 .into(),
-            options: vec![
-                OptionSpec::required(
-                    "gt",
-                    OptionKind::Path,
-                    "folder of ground-truth images (png/jpg), matched to predictions by file stem",
-                ),
-                OptionSpec::string(
-                    "lpips",
-                    "auto",
-                    "auto: LPIPS when its weights are installed (scripts/lpips/fetch-weights.sh); \
-                     require: fail without them; off: skip LPIPS",
-                ),
-                OptionSpec::bool("vgg", false, "also report LPIPS-VGG (about 25x slower)"),
-                OptionSpec::optional(
-                    "lpips_weights",
-                    OptionKind::Path,
-                    "folder holding alex.safetensors/vgg.safetensors (default: \
-                     $COCOG_LPIPS_WEIGHTS, else the user cache folder cocog/lpips)",
-                ),
-                OptionSpec::int("threads", 0, "LPIPS worker threads; 0 = all cores"),
-            ],
+            options: [OptionSpec::required(
+                "gt",
+                OptionKind::Path,
+                "folder of ground-truth images (png/jpg), matched to predictions by file stem",
+            )]
+            .into_iter()
+            .chain(metric_options())
+            .collect(),
         }
     }
 
@@ -70,12 +57,34 @@ impl Stage for EvalStage {
             ctx.warn(note);
         }
         let json = report.to_json();
-        cocog_metrics::write_json_atomic(&req.output, &json).map_err(stage_error)?;
+        write_json_atomic(&req.output, &json).map_err(stage_error)?;
         Ok(json)
     }
 }
 
-fn eval_options(req: &StageRequest) -> Result<EvalOptions, StageError> {
+/// The options that choose the metrics, shared with `eval-scene`.
+pub fn metric_options() -> Vec<OptionSpec> {
+    vec![
+        OptionSpec::string(
+            "lpips",
+            "auto",
+            "auto: LPIPS when its weights are installed (scripts/lpips/fetch-weights.sh); \
+             require: fail without them; off: skip LPIPS",
+        ),
+        OptionSpec::bool("vgg", false, "also report LPIPS-VGG (about 25x slower)"),
+        OptionSpec::optional(
+            "lpips_weights",
+            OptionKind::Path,
+            "folder holding alex.safetensors/vgg.safetensors (default: \
+             $COCOG_LPIPS_WEIGHTS, else the user cache folder cocog/lpips)",
+        ),
+        OptionSpec::int("threads", 0, "LPIPS worker threads; 0 = all cores"),
+    ]
+}
+
+/// The metric options (`lpips`, `vgg`, `threads`, `lpips_weights`) of a request; shared with
+/// `eval-scene`, which scores renders the same way.
+pub fn eval_options(req: &StageRequest) -> Result<EvalOptions, StageError> {
     let o = &req.options;
     let lpips = match o.get_str("lpips").unwrap_or("auto") {
         "auto" => LpipsMode::Auto,
@@ -102,7 +111,7 @@ fn eval_options(req: &StageRequest) -> Result<EvalOptions, StageError> {
 }
 
 /// Bad images and folders are the user's input; everything else keeps its own type.
-fn stage_error(e: MetricsError) -> StageError {
+pub fn stage_error(e: MetricsError) -> StageError {
     match e {
         MetricsError::Cancelled => StageError::Cancelled,
         MetricsError::Io { path, source } | MetricsError::Write { path, source } => {
@@ -117,7 +126,8 @@ fn stage_error(e: MetricsError) -> StageError {
     }
 }
 
-struct CtxObserver<'a>(&'a dyn Context);
+/// Reports scoring progress and cancellation through a stage context.
+pub struct CtxObserver<'a>(pub &'a dyn Context);
 
 impl Observer for CtxObserver<'_> {
     fn progress(&self, done: usize, total: usize) {

@@ -1,0 +1,112 @@
+//! The `eval-scene` stage: render a split of a trained scene and score it against its photos.
+
+use std::path::Path;
+
+use cocog_eval::{CtxObserver, eval_options, metric_options, stage_error};
+use cocog_formats::images::write_downscaled;
+use cocog_pipeline::{Context, OutputKind, Stage, StageError, StageInfo, StageKind, StageRequest};
+use serde_json::{Value, json};
+
+use crate::render_stage::{RenderJob, downscale, downscale_option, render_views, split_option};
+use crate::{parse_split, split_cameras};
+
+pub struct EvalScene;
+
+/// The split's photos at the render size, named by view stem so they pair with the renders.
+fn ground_truth(
+    scene_dir: &Path,
+    job: &RenderJob,
+    out: &Path,
+    ctx: &dyn Context,
+) -> Result<(), StageError> {
+    let mut scene = cocog_pipeline::Scene::load(scene_dir)?;
+    scene.rebase(scene_dir)?;
+    let views = split_cameras(&scene, scene_dir, job.split, job.downscale)?;
+    for (i, view) in views.iter().enumerate() {
+        ctx.check_cancelled()?;
+        ctx.progress("ground truth", i as u64, views.len() as u64);
+        let ext = view
+            .image
+            .extension()
+            .map_or("png".into(), |e| e.to_string_lossy().into_owned());
+        let dst = out.join(format!("{}.{ext}", view.stem()));
+        let (w, h) = write_downscaled(&view.image, &dst, job.downscale)
+            .map_err(|e| StageError::Input(format!("view {:?}: {e}", view.name)))?;
+        if (w, h) != (view.camera.width, view.camera.height) {
+            return Err(StageError::Input(format!(
+                "{}: the photo is {w}×{h} at downscale {}, its camera {}×{}",
+                view.image.display(),
+                job.downscale,
+                view.camera.width,
+                view.camera.height
+            )));
+        }
+    }
+    Ok(())
+}
+
+impl Stage for EvalScene {
+    fn info(&self) -> StageInfo {
+        StageInfo {
+            name: "eval-scene".into(),
+            kind: StageKind::Eval,
+            output: OutputKind::File,
+            description: "Render a trained scene's views (default: the test split) and score \
+                          them against its photos like `eval`; writes metrics.json"
+                .into(),
+            options: [split_option(), downscale_option()]
+                .into_iter()
+                .chain(metric_options())
+                .collect(),
+        }
+    }
+
+    fn run(&self, req: &StageRequest, ctx: &dyn Context) -> Result<Value, StageError> {
+        let split_name = req.options.get_str("split").unwrap_or("test").to_owned();
+        let job = RenderJob {
+            split: parse_split(&split_name)?,
+            downscale: downscale(req, "eval-scene")?,
+            background: [0.0; 3],
+            depth: false,
+        };
+        let opts = eval_options(req)?;
+        // Beside the output, so the renders sit on the same disk and vanish with the stage.
+        let parent = req.output.parent().unwrap_or_else(|| Path::new("."));
+        let work = tempfile::Builder::new()
+            .prefix(".cocog-eval-scene-")
+            .tempdir_in(parent)
+            .map_err(|e| StageError::io(parent, e))?;
+        let (pred, gt) = (work.path().join("renders"), work.path().join("gt"));
+        for dir in [&pred, &gt] {
+            std::fs::create_dir(dir).map_err(|e| StageError::io(dir, e))?;
+        }
+        let rendered = render_views(&req.input, &job, &pred, ctx)?;
+        ground_truth(&req.input, &job, &gt, ctx)?;
+        let report = cocog_metrics_eval(&pred, &gt, &opts, ctx)?;
+        let mut json = report;
+        if let Some(map) = json.as_object_mut() {
+            map.insert("split".into(), json!(split_name));
+            map.insert("downscale".into(), json!(job.downscale));
+            map.insert("views".into(), rendered["views"].clone());
+            map.insert("gaussians".into(), rendered["gaussians"].clone());
+        }
+        cocog_eval::write_json_atomic(&req.output, &json).map_err(stage_error)?;
+        Ok(json)
+    }
+}
+
+fn cocog_metrics_eval(
+    pred: &Path,
+    gt: &Path,
+    opts: &cocog_eval::EvalOptions,
+    ctx: &dyn Context,
+) -> Result<Value, StageError> {
+    let report =
+        cocog_eval::evaluate_dirs(pred, gt, opts, &CtxObserver(ctx)).map_err(stage_error)?;
+    if let Some(note) = &report.lpips.note
+        && opts.lpips != cocog_eval::LpipsMode::Off
+    {
+        ctx.warn(note);
+    }
+    Ok(report.to_json())
+}
