@@ -218,9 +218,15 @@ pub struct ExportArgs {
 pub struct RenderArgs {
     #[command(flatten)]
     pub io: SceneToScene,
-    /// Which views: test, train or all.
+    /// Which views: test, train or all. Default test.
     #[arg(long)]
     pub split: Option<String>,
+    /// Render at the views' size divided by N (use the training --downscale to compare).
+    #[arg(long)]
+    pub downscale: Option<u32>,
+    /// Background colour R,G,B in 0..1. Default 0,0,0 (what training composites over).
+    #[arg(long)]
+    pub background: Option<String>,
     /// Refocus: plane in focus, in scene units.
     #[arg(long = "focus-distance")]
     pub focus_distance: Option<f64>,
@@ -234,8 +240,15 @@ pub struct RenderArgs {
 
 #[derive(Args)]
 pub struct EvalArgs {
-    /// A scene to render and score (needs a trained scene).
+    /// A trained scene to render and score against its own photos.
     pub scene: Option<PathBuf>,
+    /// With SCENE: which views to score: test, train or all. Default test.
+    #[arg(long, requires = "scene")]
+    pub split: Option<String>,
+    /// With SCENE: render and score at the photos' size divided by N (match the training
+    /// --downscale). Default 1.
+    #[arg(long, requires = "scene")]
+    pub downscale: Option<u32>,
     /// A folder of predicted images (instead of a scene).
     #[arg(long, requires = "gt", conflicts_with = "scene")]
     pub pred: Option<PathBuf>,

@@ -5,7 +5,6 @@ use std::path::Path;
 
 use anyhow::{Context as _, Result};
 use cocog_pipeline::plugin::plugin_dirs;
-use cocog_pipeline::registry::RegistryError;
 use cocog_pipeline::runner::{run_pipeline, run_stage};
 use cocog_pipeline::{Context, Registry, StageEntry};
 use serde_json::{Map, Value};
@@ -25,18 +24,6 @@ impl fmt::Display for UsageError {
 }
 
 impl std::error::Error for UsageError {}
-
-/// A stage this build does not have (exit code 3).
-#[derive(Debug)]
-pub struct Unavailable(pub String);
-
-impl fmt::Display for Unavailable {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.0)
-    }
-}
-
-impl std::error::Error for Unavailable {}
 
 /// Builds an options object from the flags the user actually gave.
 macro_rules! options {
@@ -108,7 +95,8 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
         }
         Command::Render(a) => {
             let o = options! {
-                "split" => a.split.clone(), "focus_distance" => a.focus_distance,
+                "split" => a.split.clone(), "downscale" => a.downscale,
+                "background" => a.background.clone(), "focus_distance" => a.focus_distance,
                 "aperture" => a.aperture, "depth" => a.depth.then_some(true),
             };
             run("render", &a.io.scene, &a.io.output, o)
@@ -189,20 +177,9 @@ fn build_registry(g: &Global, ctx: &dyn Context, listing: bool) -> Result<Regist
     Ok(registry)
 }
 
-/// Finds a stage, explaining which part of cocog brings a stage that is not built yet.
+/// Finds a stage: built in, or from a plugin.
 pub fn resolve<'a>(registry: &'a Registry, name: &str) -> Result<&'a StageEntry> {
-    match registry.resolve(name) {
-        Ok(e) => Ok(e),
-        Err(RegistryError::Unknown { .. }) if builtins::planned(name).is_some() => {
-            let by = builtins::planned(name).unwrap_or_default();
-            Err(Unavailable(format!(
-                "stage '{name}' is not built into this cocog yet (it arrives with {by}); \
-                 a plugin can provide it with --use {name}=PLUGIN"
-            ))
-            .into())
-        }
-        Err(e) => Err(e.into()),
-    }
+    Ok(registry.resolve(name)?)
 }
 
 pub fn run_named(
@@ -250,7 +227,20 @@ fn eval(
                 .output
                 .clone()
                 .unwrap_or_else(|| scene.join("metrics.json"));
-            run_named(registry, "eval-scene", scene, &output, &Map::new(), g, ctx)
+            let o = options! {
+                "split" => a.split.clone(), "downscale" => a.downscale,
+                "lpips" => a.lpips.clone(), "vgg" => a.vgg.then_some(true),
+                "threads" => a.threads,
+                "lpips_weights" => a.lpips_weights.as_ref().map(|p| p.display().to_string()),
+            };
+            // Re-scoring a scene replaces its own default metrics file.
+            let force = g.force || a.output.is_none();
+            let entry = resolve(registry, "eval-scene")?;
+            let summary = run_stage(entry, scene, &output, &o, force, ctx)?;
+            if !g.quiet {
+                eprint!("{}", cocog_eval::format_table(&summary));
+            }
+            print_result(g, &summary, &output)
         }
         _ => Err(UsageError("eval needs a SCENE, or --pred DIR --gt DIR".to_owned()).into()),
     }

@@ -97,9 +97,6 @@ fn exit_code(e: &anyhow::Error) -> u8 {
         if let Some(RegistryError::Unknown { .. }) = cause.downcast_ref::<RegistryError>() {
             return exit::UNAVAILABLE;
         }
-        if cause.downcast_ref::<commands::Unavailable>().is_some() {
-            return exit::UNAVAILABLE;
-        }
         if cause.downcast_ref::<commands::UsageError>().is_some() {
             return exit::USAGE;
         }

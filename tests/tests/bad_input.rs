@@ -111,10 +111,11 @@ fn bad_option_values_are_named() {
 }
 
 #[test]
-fn unavailable_stage_exits_3_and_says_what_brings_it() {
-    let out = cocog(&["render", "a", "-o", "b"]);
+fn unknown_stage_exits_3_and_lists_the_stages() {
+    let out = cocog(&["stage", "no-such-stage", "a", "-o", "b"]);
     assert_eq!(out.status.code(), Some(3), "{}", stderr(&out));
-    assert!(stderr(&out).contains("issue #5"), "{}", stderr(&out));
+    assert!(stderr(&out).contains("no-such-stage"), "{}", stderr(&out));
+    assert!(stderr(&out).contains("eval-scene"), "{}", stderr(&out));
 }
 
 #[test]
