@@ -82,6 +82,21 @@ pub fn run(registry: &Registry, a: &DemoArgs, g: &Global, ctx: &dyn Context) -> 
     if ran.is_empty() {
         bail!("demo: no stage of the chain is available in this build");
     }
+    // Score the sharp held-out views, so the demo ends with a number and shows how.
+    let trained = root.join("3-train");
+    if let (true, Ok(entry)) = (trained.exists(), registry.resolve("eval-scene")) {
+        let metrics = root.join("metrics.json");
+        ctx.info(&format!(
+            "demo: eval-scene -> {} (same as `cocog eval {}`)",
+            metrics.display(),
+            trained.display()
+        ));
+        let scores = run_stage(entry, &trained, &metrics, &Map::new(), true, ctx)?;
+        if !g.quiet {
+            eprint!("{}", cocog_eval::format_table(&scores));
+        }
+        ran.push(json!({ "stage": "eval-scene", "output": metrics, "summary": scores }));
+    }
     let summary = json!({ "root": root, "stages": ran });
     print_result(g, &summary, Path::new(&input))
 }

@@ -9,7 +9,14 @@ fn demo_generates_its_dataset_and_runs_the_available_stages() {
     let out = cocog(&["demo", "-o", path_str(&root)]);
     assert!(out.status.success(), "{}", stderr(&out));
     let names = listing(&root);
-    for expected in ["1-ingest", "2-densify", "3-train", "dataset", "scene.ply"] {
+    for expected in [
+        "1-ingest",
+        "2-densify",
+        "3-train",
+        "dataset",
+        "scene.ply",
+        "metrics.json",
+    ] {
         assert!(names.contains(&expected.to_owned()), "{names:?}");
     }
     assert_eq!(listing(&root.join("dataset/images")).len(), 16);
@@ -18,6 +25,11 @@ fn demo_generates_its_dataset_and_runs_the_available_stages() {
     assert!(last.trim().ends_with("scene.ply"), "{last}");
     assert!(root.join("3-train/gaussians.ply").exists());
     assert!(root.join("3-train/checkpoint/state.safetensors").exists());
+    let metrics: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(root.join("metrics.json")).expect("metrics"))
+            .expect("metrics JSON");
+    let psnr = metrics["mean"]["psnr"].as_f64().expect("mean PSNR");
+    assert!(psnr.is_finite() && psnr > 10.0, "{metrics}");
 
     // The benchmark runs on the demo's scene and reports every phase.
     let ingested = root.join("1-ingest");
