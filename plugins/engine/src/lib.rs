@@ -40,7 +40,7 @@ pub use error::EngineError;
 pub use gpu::{
     Adam, AdamConfig, AdamMoments, Batch, ForwardState, GpuBuffer, GpuContext, Gradients,
     ImageLoss, ImageSpec, LossOutput, MemoryTracker, ParamBuffers, PrefixSum, RadixSort,
-    RenderedImage, Renderer, SortBuffers,
+    RenderedImage, Renderer, SortBuffers, test_gpu,
 };
 pub use types::{
     ALPHA_MAX, ALPHA_MIN, Camera, GaussianGrads, GaussianParams, LOW_PASS, MAX_SH_DEGREE,

@@ -104,6 +104,22 @@ impl Camera {
         (r, tc)
     }
 
+    /// The same view at `width`×`height`: every intrinsic scales by the size ratio (pixel
+    /// corners at integer coordinates, so the image edges stay where they were).
+    pub fn resized(&self, width: u32, height: u32) -> Camera {
+        let sx = f64::from(width) / f64::from(self.width);
+        let sy = f64::from(height) / f64::from(self.height);
+        Camera {
+            fx: self.fx * sx,
+            fy: self.fy * sy,
+            cx: self.cx * sx,
+            cy: self.cy * sy,
+            width,
+            height,
+            world_from_camera: self.world_from_camera,
+        }
+    }
+
     pub fn centre(&self) -> [f64; 3] {
         let m = &self.world_from_camera;
         [m[0][3], m[1][3], m[2][3]]
@@ -133,4 +149,29 @@ pub struct GaussianGrads {
     pub v_quats: Vec<[f32; 4]>,
     pub v_opacity_logits: Vec<f32>,
     pub v_sh: Vec<f32>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Camera;
+
+    #[test]
+    fn resizing_keeps_the_image_corners_in_place() {
+        let cam = Camera {
+            fx: 388.0,
+            fy: 390.0,
+            cx: 201.0,
+            cy: 149.0,
+            width: 400,
+            height: 300,
+            world_from_camera: [[0.0; 4]; 4],
+        };
+        let small = cam.resized(100, 75);
+        assert_eq!((small.width, small.height), (100, 75));
+        // A ray through the full image's corner pixel edge (400, 300) hits (100, 75).
+        let (x, y) = ((400.0 - cam.cx) / cam.fx, (300.0 - cam.cy) / cam.fy);
+        assert!((small.fx * x + small.cx - 100.0).abs() < 1e-12);
+        assert!((small.fy * y + small.cy - 75.0).abs() < 1e-12);
+        assert!((small.cx - 50.25).abs() < 1e-12);
+    }
 }

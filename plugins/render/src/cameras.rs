@@ -56,7 +56,7 @@ pub fn split_cameras(
             Split::Train => "train",
         });
         return Err(StageError::Input(format!(
-            "{}: scene.json has no {which} views (try --split all)",
+            "{}: scene.json has no {which} views (render and eval pick them with --split)",
             scene_dir.display()
         )));
     }
@@ -72,22 +72,19 @@ pub fn split_cameras(
                 ))
             })?;
             let (w, h) = downscaled_size(cam.width, cam.height, downscale);
-            let (sx, sy) = (
-                f64::from(w) / f64::from(cam.width),
-                f64::from(h) / f64::from(cam.height),
-            );
+            let full = Camera {
+                fx: cam.fx,
+                fy: cam.fy,
+                cx: cam.cx,
+                cy: cam.cy,
+                width: cam.width,
+                height: cam.height,
+                world_from_camera: view.world_from_camera,
+            };
             Ok(NamedCamera {
                 name: view.name.clone(),
                 image: Scene::resolve(scene_dir, &view.image),
-                camera: Camera {
-                    fx: cam.fx * sx,
-                    fy: cam.fy * sy,
-                    cx: cam.cx * sx,
-                    cy: cam.cy * sy,
-                    width: w,
-                    height: h,
-                    world_from_camera: view.world_from_camera,
-                },
+                camera: full.resized(w, h),
             })
         })
         .collect()

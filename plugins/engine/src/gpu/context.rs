@@ -42,6 +42,28 @@ fn rank(info: &wgpu::AdapterInfo) -> u32 {
     }
 }
 
+/// The GPU context GPU tests share, or `None` (reason printed) on a machine without an adapter.
+/// With `CI=true` a missing adapter panics instead: CI must never pass by skipping GPU tests.
+/// One context per test binary: creating devices is slow on software adapters.
+pub fn test_gpu() -> Option<&'static GpuContext> {
+    static CTX: std::sync::OnceLock<Option<GpuContext>> = std::sync::OnceLock::new();
+    CTX.get_or_init(|| match GpuContext::new() {
+        Ok(ctx) => {
+            eprintln!("GPU tests run on {}", ctx.adapter_name());
+            Some(ctx)
+        }
+        Err(e) => {
+            assert!(
+                std::env::var("CI").as_deref() != Ok("true"),
+                "CI=true but no usable GPU adapter: {e}"
+            );
+            eprintln!("skipping GPU test: {e}");
+            None
+        }
+    })
+    .as_ref()
+}
+
 impl GpuContext {
     /// Picks an adapter: the one whose name contains `COCOG_ADAPTER` if that is set, else the
     /// most capable kind (discrete > integrated > virtual > CPU such as lavapipe).

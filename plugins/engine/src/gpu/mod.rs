@@ -14,7 +14,7 @@ mod state;
 pub use adam::{Adam, AdamConfig, AdamMoments};
 pub use batch::{Batch, ImageSpec, ParamBuffers};
 pub use buffers::{GpuBuffer, MemoryTracker};
-pub use context::GpuContext;
+pub use context::{GpuContext, test_gpu};
 pub use loss::{ImageLoss, LossOutput};
 pub use renderer::Renderer;
 pub use scan::PrefixSum;

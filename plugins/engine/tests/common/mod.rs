@@ -101,23 +101,5 @@ pub fn random_weights(npix: usize, seed: u64) -> (Vec<[f64; 3]>, Vec<f64>, Vec<f
     (c, a, d)
 }
 
-/// The shared GPU context of this test binary, or `None` (with the reason printed) when no
-/// adapter exists. With `CI=true` a missing adapter is a failure, not a skip.
-pub fn gpu() -> Option<&'static cocog_engine::GpuContext> {
-    static CTX: std::sync::OnceLock<Option<cocog_engine::GpuContext>> = std::sync::OnceLock::new();
-    CTX.get_or_init(|| match cocog_engine::GpuContext::new() {
-        Ok(ctx) => {
-            eprintln!("GPU tests run on {}", ctx.adapter_name());
-            Some(ctx)
-        }
-        Err(e) => {
-            assert!(
-                std::env::var("CI").as_deref() != Ok("true"),
-                "CI=true but no usable GPU adapter: {e}"
-            );
-            eprintln!("skipping GPU test: {e}");
-            None
-        }
-    })
-    .as_ref()
-}
+#[allow(unused_imports)] // not every test binary that includes this module runs on the GPU
+pub use cocog_engine::test_gpu as gpu;

@@ -2,8 +2,8 @@
 
 use std::path::Path;
 
-use cocog_engine::{Camera, GaussianParams};
-use cocog_formats::images::{downscaled_size, load_rgb, write_downscaled};
+use cocog_engine::GaussianParams;
+use cocog_formats::images::{load_rgb, write_downscaled};
 use cocog_pipeline::{Context, Scene, Split, StageError, StageRequest};
 
 use crate::{TrainConfig, TrainView, init_from_points};
@@ -73,29 +73,17 @@ pub fn train_views(
     scratch: &Path,
     ctx: &dyn Context,
 ) -> Result<Vec<TrainView>, StageError> {
-    let views: Vec<_> = scene.views_in(Split::Train).collect();
-    if views.is_empty() {
-        return Err(StageError::Input(format!(
-            "{}: scene.json has no views with split \"train\"",
-            input.display()
-        )));
-    }
+    let views = cocog_render::split_cameras(scene, input, Some(Split::Train), downscale)?;
     let total = views.len() as u64;
     let mut out = Vec::with_capacity(views.len());
     for (i, view) in views.iter().enumerate() {
         ctx.check_cancelled()?;
         ctx.progress("load images", i as u64, total);
-        let cam = scene.camera(view.camera).ok_or_else(|| {
-            StageError::Input(format!(
-                "scene.json view {:?}: camera {} does not exist",
-                view.name, view.camera
-            ))
-        })?;
-        let (w, h) = downscaled_size(cam.width, cam.height, downscale);
-        let src = Scene::resolve(input, &view.image);
+        let (w, h) = (view.camera.width, view.camera.height);
+        let src = &view.image;
         let path = if downscale > 1 {
             let dst = scratch.join(format!("{i}.png"));
-            write_downscaled(&src, &dst, downscale)
+            write_downscaled(src, &dst, downscale)
                 .map_err(|e| StageError::Input(format!("view {:?}: {e}", view.name)))?;
             dst
         } else {
@@ -105,29 +93,15 @@ pub fn train_views(
             .map_err(|e| StageError::Input(format!("view {:?}: {e}", view.name)))?;
         if (img.width, img.height) != (w, h) {
             return Err(StageError::Input(format!(
-                "{}: image is {}×{} after downscale {downscale}, but camera {} of view {:?} is {w}×{h}",
+                "{}: image is {}×{} after downscale {downscale}, but the camera of view {:?} is {w}×{h}",
                 src.display(),
                 img.width,
                 img.height,
-                view.camera,
                 view.name
             )));
         }
-        // Pixel-corner convention (as ingest): every intrinsic scales by the size ratio.
-        let (sx, sy) = (
-            f64::from(w) / f64::from(cam.width),
-            f64::from(h) / f64::from(cam.height),
-        );
         out.push(TrainView {
-            camera: Camera {
-                fx: cam.fx * sx,
-                fy: cam.fy * sy,
-                cx: cam.cx * sx,
-                cy: cam.cy * sy,
-                width: w,
-                height: h,
-                world_from_camera: view.world_from_camera,
-            },
+            camera: view.camera,
             image: img
                 .data
                 .chunks_exact(3)

@@ -8,25 +8,7 @@ use cocog_train::{SplitMix64, TrainView, Trainer, init_from_points};
 pub const W: u32 = 48;
 pub const H: u32 = 36;
 
-/// The shared GPU context, or `None` (reason printed) without an adapter; a failure under CI.
-pub fn gpu() -> Option<&'static GpuContext> {
-    static CTX: std::sync::OnceLock<Option<GpuContext>> = std::sync::OnceLock::new();
-    CTX.get_or_init(|| match GpuContext::new() {
-        Ok(ctx) => {
-            eprintln!("GPU tests run on {}", ctx.adapter_name());
-            Some(ctx)
-        }
-        Err(e) => {
-            assert!(
-                std::env::var("CI").as_deref() != Ok("true"),
-                "CI=true but no usable GPU adapter: {e}"
-            );
-            eprintln!("skipping GPU test: {e}");
-            None
-        }
-    })
-    .as_ref()
-}
+pub use cocog_engine::test_gpu as gpu;
 
 /// A camera at `eye` looking at the origin (OpenCV axes: columns right, down, forward).
 pub fn look_at_origin(eye: [f64; 3]) -> Camera {
