@@ -154,7 +154,8 @@ pub struct PruneArgs {
 
 #[derive(Clone, Copy, ValueEnum)]
 pub enum Method {
-    /// CoCoGaussian: circle-of-confusion Gaussians, for photos with depth-of-field blur.
+    /// CoCoGaussian: circle-of-confusion Gaussians, for photos with depth-of-field blur
+    /// (not implemented yet: refused with a message).
     Cocog,
     /// Plain 3D Gaussian Splatting, for sharp photos.
     #[value(name = "3dgs")]
@@ -165,15 +166,17 @@ pub enum Method {
 pub struct TrainArgs {
     #[command(flatten)]
     pub io: SceneToScene,
+    /// Training method. Default 3dgs (until cocog lands).
     #[arg(long, value_enum)]
     pub method: Option<Method>,
-    /// Training iterations (the paper uses 30000).
+    /// Training iterations, one view each. Default 7000 (3DGS's and the paper's long runs
+    /// use 30000).
     #[arg(long)]
     pub iterations: Option<u64>,
     /// CoC Gaussians per base Gaussian, M (the paper uses 5).
     #[arg(long = "coc-gaussians")]
     pub coc_gaussians: Option<u64>,
-    /// Train on images downscaled by N.
+    /// Train on images downscaled by N (intrinsics scaled to match). Default 1.
     #[arg(long)]
     pub downscale: Option<u32>,
     /// Random seed (view order, splits, random backgrounds).
