@@ -37,6 +37,14 @@ pub fn parse_split(value: &str) -> Result<Option<Split>, StageError> {
     }
 }
 
+/// The option value naming `split`.
+pub fn split_name(split: Split) -> &'static str {
+    match split {
+        Split::Test => "test",
+        Split::Train => "train",
+    }
+}
+
 /// Cameras of the views in `split` (all views for None), shrunk by `downscale` with every
 /// intrinsic scaled by the size ratio (pixel-corner convention, as ingest and train do).
 pub fn split_cameras(
@@ -51,12 +59,14 @@ pub fn split_cameras(
         .filter(|v| split.is_none_or(|s| v.split == s))
         .collect();
     if views.is_empty() {
-        let which = split.map_or("any", |s| match s {
-            Split::Test => "test",
-            Split::Train => "train",
-        });
+        let which = split.map_or("any", split_name);
+        let hint = if split.is_some() {
+            "; pick other views with --split all (or --split train)"
+        } else {
+            ""
+        };
         return Err(StageError::Input(format!(
-            "{}: scene.json has no {which} views (render and eval pick them with --split)",
+            "{}: scene.json has no {which} views{hint}",
             scene_dir.display()
         )));
     }

@@ -1,6 +1,7 @@
 //! The `eval-scene` stage: render a split of a trained scene and score it against its photos.
 
-use std::path::Path;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
 
 use cocog_eval::{CtxObserver, eval_options, metric_options, stage_error};
 use cocog_formats::images::write_downscaled;
@@ -12,24 +13,22 @@ use crate::{parse_split, split_cameras};
 
 pub struct EvalScene;
 
-/// The split's photos at the render size, named by view stem so they pair with the renders.
+/// The split's photos at the render size, named by view stem so they pair with the renders;
+/// returns each stem's original photo.
 fn ground_truth(
     scene_dir: &Path,
     job: &RenderJob,
     out: &Path,
     ctx: &dyn Context,
-) -> Result<(), StageError> {
+) -> Result<BTreeMap<String, PathBuf>, StageError> {
     let mut scene = cocog_pipeline::Scene::load(scene_dir)?;
     scene.rebase(scene_dir)?;
     let views = split_cameras(&scene, scene_dir, job.split, job.downscale)?;
     for (i, view) in views.iter().enumerate() {
         ctx.check_cancelled()?;
         ctx.progress("ground truth", i as u64, views.len() as u64);
-        let ext = view
-            .image
-            .extension()
-            .map_or("png".into(), |e| e.to_string_lossy().into_owned());
-        let dst = out.join(format!("{}.{ext}", view.stem()));
+        // write_downscaled always encodes PNG (lossless, even for a JPEG photo at factor 1).
+        let dst = out.join(format!("{}.png", view.stem()));
         let (w, h) = write_downscaled(&view.image, &dst, job.downscale)
             .map_err(|e| StageError::Input(format!("view {:?}: {e}", view.name)))?;
         if (w, h) != (view.camera.width, view.camera.height) {
@@ -42,7 +41,30 @@ fn ground_truth(
             )));
         }
     }
-    Ok(())
+    Ok(views.into_iter().map(|v| (v.stem(), v.image)).collect())
+}
+
+/// The report names the scratch folders, which are gone once the stage returns: point at the
+/// scene and its photos instead.
+fn replace_scratch_paths(report: &mut Value, scene_dir: &Path, photos: &BTreeMap<String, PathBuf>) {
+    let Some(map) = report.as_object_mut() else {
+        return;
+    };
+    map.remove("pred_dir");
+    map.remove("gt_dir");
+    map.insert("scene".into(), json!(scene_dir));
+    let images = map.get_mut("images").and_then(Value::as_array_mut);
+    for image in images.into_iter().flatten() {
+        if let Some(entry) = image.as_object_mut() {
+            entry.remove("pred");
+            let name = entry
+                .get("name")
+                .and_then(Value::as_str)
+                .unwrap_or_default();
+            let photo = photos.get(name).map(|p| json!(p));
+            entry.insert("gt".into(), photo.unwrap_or(Value::Null));
+        }
+    }
 }
 
 impl Stage for EvalScene {
@@ -81,9 +103,9 @@ impl Stage for EvalScene {
             std::fs::create_dir(dir).map_err(|e| StageError::io(dir, e))?;
         }
         let rendered = render_views(&req.input, &job, &pred, ctx)?;
-        ground_truth(&req.input, &job, &gt, ctx)?;
-        let report = cocog_metrics_eval(&pred, &gt, &opts, ctx)?;
-        let mut json = report;
+        let photos = ground_truth(&req.input, &job, &gt, ctx)?;
+        let mut json = cocog_metrics_eval(&pred, &gt, &opts, ctx)?;
+        replace_scratch_paths(&mut json, &req.input, &photos);
         if let Some(map) = json.as_object_mut() {
             map.insert("split".into(), json!(split_name));
             map.insert("downscale".into(), json!(job.downscale));

@@ -10,7 +10,7 @@ mod eval_scene;
 mod render_stage;
 mod renderer;
 
-pub use cameras::{NamedCamera, parse_split, split_cameras};
+pub use cameras::{NamedCamera, parse_split, split_cameras, split_name};
 pub use eval_scene::EvalScene;
 pub use render_stage::Render;
 pub use renderer::{SceneRenderer, load_gaussians};

@@ -129,6 +129,8 @@ pub(crate) fn render_views(
     ctx.progress("render", total, total);
     let (w, h) = (cameras[0].camera.width, cameras[0].camera.height);
     Ok(json!({
+        "split": job.split.map_or("all", crate::split_name),
+        "downscale": job.downscale,
         "views": cameras.len(),
         "width": w,
         "height": h,
