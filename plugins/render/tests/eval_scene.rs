@@ -1,0 +1,97 @@
+//! `eval-scene` scores its renders exactly as `eval` scores the same folders.
+
+mod common;
+
+use cocog_eval::{EvalOptions, LpipsMode, evaluate_dirs};
+use common::{gpu_available, reference_png, run, stage, write_scene};
+use serde_json::{Value, json};
+
+/// PSNR from a report; identical images have +inf, which JSON stores as null.
+fn psnr(report: &Value) -> f64 {
+    report["mean"]["psnr"].as_f64().unwrap_or(f64::INFINITY)
+}
+
+#[test]
+fn photos_equal_to_the_reference_score_near_perfect() {
+    if !gpu_available() {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let (exact, _) = reference_png();
+    let scene = tmp.path().join("scene");
+    write_scene(&scene, &exact);
+    let metrics = tmp.path().join("metrics.json");
+    let report = run(
+        stage("eval-scene").as_ref(),
+        &scene,
+        &metrics,
+        json!({"lpips": "off"}),
+    )
+    .unwrap();
+    eprintln!("eval-scene on exact photos: {}", report["mean"]);
+    assert_eq!(
+        (report["views"].as_u64(), report["split"].as_str()),
+        (Some(1), Some("test"))
+    );
+    assert!(psnr(&report) > 40.0, "{}", report["mean"]);
+    let ssim = report["mean"]["ssim_gaussian11"].as_f64().unwrap();
+    assert!(ssim > 0.99, "{}", report["mean"]);
+    // The scratch folders are gone, so the report names the scene and its photos instead.
+    assert!(report.get("pred_dir").is_none(), "{report}");
+    assert_eq!(report["scene"], json!(scene));
+    assert_eq!(report["images"][0]["gt"], json!(scene.join("images/a.png")));
+    assert!(
+        std::fs::read_dir(tmp.path()).unwrap().all(|e| !e
+            .unwrap()
+            .file_name()
+            .to_string_lossy()
+            .starts_with('.')),
+        "the scratch renders are removed"
+    );
+}
+
+#[test]
+fn perturbed_photos_score_what_eval_scores_on_the_renders() {
+    if !gpu_available() {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let (mut photo, _) = reference_png();
+    for (i, p) in photo.pixels_mut().enumerate() {
+        p.0[i % 3] = p.0[i % 3].saturating_add((i % 7) as u8 * 6);
+    }
+    let scene = tmp.path().join("scene");
+    write_scene(&scene, &photo);
+    let metrics = tmp.path().join("metrics.json");
+    let report = run(
+        stage("eval-scene").as_ref(),
+        &scene,
+        &metrics,
+        json!({"lpips": "off"}),
+    )
+    .unwrap();
+    let written: Value = serde_json::from_slice(&std::fs::read(&metrics).unwrap()).unwrap();
+    assert_eq!(written, report);
+    assert!(psnr(&report) < 40.0, "{}", report["mean"]);
+
+    // The same renders scored by `eval`'s code straight from the two folders.
+    let renders = tmp.path().join("renders");
+    std::fs::create_dir(&renders).unwrap();
+    run(stage("render").as_ref(), &scene, &renders, json!({})).unwrap();
+    let opts = EvalOptions {
+        lpips: LpipsMode::Off,
+        ..EvalOptions::default()
+    };
+    let direct = evaluate_dirs(&renders, &scene.join("images"), &opts, &())
+        .unwrap()
+        .to_json();
+    eprintln!("eval-scene {} vs eval {}", report["mean"], direct["mean"]);
+    for key in ["psnr", "ssim_deblurnerf", "ssim_gaussian11"] {
+        let (a, b) = (&report["mean"][key], &direct["mean"][key]);
+        assert!(
+            (a.as_f64().unwrap() - b.as_f64().unwrap()).abs() < 1e-9,
+            "{key}: {a} vs {b}"
+        );
+    }
+    assert_eq!(report["images"][0]["name"], "a");
+}
