@@ -66,7 +66,8 @@ pub enum Command {
     Prune(PruneArgs),
     /// Write the trained Gaussians to a file other tools open (PLY, glTF).
     Export(ExportArgs),
-    /// Render the scene's views to PNG (sharp, or refocused with a chosen lens).
+    /// Render a trained scene's views to PNG, optionally with depth (EXR). Sharp only for
+    /// now: refocusing needs a CoCoGaussian model.
     Render(RenderArgs),
     /// Score images: PSNR, SSIM (both conventions), LPIPS.
     Eval(EvalArgs),
@@ -230,13 +231,15 @@ pub struct RenderArgs {
     /// Background colour R,G,B in 0..1. Default 0,0,0 (what training composites over).
     #[arg(long)]
     pub background: Option<String>,
-    /// Refocus: plane in focus, in scene units.
+    /// Refocus: plane in focus, in scene units. Needs a CoCoGaussian model, which
+    /// `train --method cocog` does not produce yet, so this is refused for now.
     #[arg(long = "focus-distance")]
     pub focus_distance: Option<f64>,
-    /// Refocus: aperture scale K of the CoC model.
+    /// Refocus: aperture scale K of the CoC model (refused for now, like --focus-distance).
     #[arg(long)]
     pub aperture: Option<f64>,
-    /// Also write depth maps (EXR).
+    /// Also write depth/<view>.exr: expected depth along the optical axis divided by the
+    /// pixel's alpha, 0 where nothing was seen.
     #[arg(long)]
     pub depth: bool,
 }
@@ -246,11 +249,12 @@ pub struct EvalArgs {
     /// A trained scene to render and score against its own photos.
     pub scene: Option<PathBuf>,
     /// With SCENE: which views to score: test, train or all. Default test.
-    #[arg(long, requires = "scene")]
+    // `pred` conflicts with `scene`, which makes clap waive `requires`: name the clash too.
+    #[arg(long, requires = "scene", conflicts_with = "pred")]
     pub split: Option<String>,
     /// With SCENE: render and score at the photos' size divided by N (match the training
     /// --downscale). Default 1.
-    #[arg(long, requires = "scene")]
+    #[arg(long, requires = "scene", conflicts_with = "pred")]
     pub downscale: Option<u32>,
     /// A folder of predicted images (instead of a scene).
     #[arg(long, requires = "gt", conflicts_with = "scene")]
@@ -258,7 +262,8 @@ pub struct EvalArgs {
     /// The folder of ground-truth images, matched to --pred by file name.
     #[arg(long)]
     pub gt: Option<PathBuf>,
-    /// Where to write metrics.json. Default: metrics.json inside the --pred folder.
+    /// Where to write metrics.json. Default: metrics.json inside SCENE, or inside the --pred
+    /// folder.
     #[arg(short, long)]
     pub output: Option<PathBuf>,
     /// LPIPS: auto (when weights are installed), require, or off. Install the weights once

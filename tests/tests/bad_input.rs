@@ -119,7 +119,26 @@ fn unknown_stage_exits_3_and_lists_the_stages() {
 }
 
 #[test]
+fn rendering_an_untrained_scene_names_the_missing_field() {
+    let work = tempfile::tempdir().expect("tempdir");
+    let input = work.path().join("scene");
+    write_tiny_scene(&input, 4, [0.0; 3], 1.0);
+    let out = cocog(&[
+        "render",
+        path_str(&input),
+        "-o",
+        path_str(&work.path().join("r")),
+    ]);
+    assert_one_line_error(&out, &["scene.json", "`gaussians`", "cocog train"]);
+    assert_eq!(listing(work.path()), vec!["scene"]);
+}
+
+#[test]
 fn usage_errors_exit_2() {
+    // --split and --downscale pick a scene's views; a --pred folder has none.
+    let out = cocog(&["eval", "--pred", "a", "--gt", "b", "--split", "train"]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(stderr(&out).contains("--split"), "{}", stderr(&out));
     let out = cocog(&["ingest", "llff"]);
     assert_eq!(out.status.code(), Some(2));
     let out = cocog(&["stage", "recenter", "a", "-o", "b", "--set", "novalue"]);
