@@ -60,7 +60,8 @@ pub fn split_cameras(
         .collect();
     if views.is_empty() {
         let which = split.map_or("any", split_name);
-        let hint = if split.is_some() {
+        // Only render/eval choose the test split; train asks for its own and has no flag.
+        let hint = if split == Some(Split::Test) {
             "; pick other views with --split all (or --split train)"
         } else {
             ""
