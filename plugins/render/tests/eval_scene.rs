@@ -6,6 +6,20 @@ use cocog_eval::{EvalOptions, LpipsMode, evaluate_dirs};
 use common::{gpu_available, reference_png, run, stage, write_scene};
 use serde_json::{Value, json};
 
+/// A scene whose test photo is `photo`, scored by `eval-scene` into `tmp/metrics.json`.
+fn score(tmp: &std::path::Path, photo: &image::RgbImage) -> (std::path::PathBuf, Value) {
+    let scene = tmp.join("scene");
+    write_scene(&scene, photo);
+    let report = run(
+        stage("eval-scene").as_ref(),
+        &scene,
+        &tmp.join("metrics.json"),
+        json!({"lpips": "off"}),
+    )
+    .unwrap();
+    (scene, report)
+}
+
 /// PSNR from a report; identical images have +inf, which JSON stores as null.
 fn psnr(report: &Value) -> f64 {
     report["mean"]["psnr"].as_f64().unwrap_or(f64::INFINITY)
@@ -18,16 +32,7 @@ fn photos_equal_to_the_reference_score_near_perfect() {
     }
     let tmp = tempfile::tempdir().unwrap();
     let (exact, _) = reference_png();
-    let scene = tmp.path().join("scene");
-    write_scene(&scene, &exact);
-    let metrics = tmp.path().join("metrics.json");
-    let report = run(
-        stage("eval-scene").as_ref(),
-        &scene,
-        &metrics,
-        json!({"lpips": "off"}),
-    )
-    .unwrap();
+    let (scene, report) = score(tmp.path(), &exact);
     eprintln!("eval-scene on exact photos: {}", report["mean"]);
     assert_eq!(
         (report["views"].as_u64(), report["split"].as_str()),
@@ -60,16 +65,8 @@ fn perturbed_photos_score_what_eval_scores_on_the_renders() {
     for (i, p) in photo.pixels_mut().enumerate() {
         p.0[i % 3] = p.0[i % 3].saturating_add((i % 7) as u8 * 6);
     }
-    let scene = tmp.path().join("scene");
-    write_scene(&scene, &photo);
+    let (scene, report) = score(tmp.path(), &photo);
     let metrics = tmp.path().join("metrics.json");
-    let report = run(
-        stage("eval-scene").as_ref(),
-        &scene,
-        &metrics,
-        json!({"lpips": "off"}),
-    )
-    .unwrap();
     let written: Value = serde_json::from_slice(&std::fs::read(&metrics).unwrap()).unwrap();
     assert_eq!(written, report);
     assert!(psnr(&report) < 40.0, "{}", report["mean"]);
