@@ -126,8 +126,16 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
             run(&a.name, &a.input, &a.output, o)
         }
         Command::Run(a) => {
-            let summary = run_pipeline(&registry, &a.pipeline, g.force, ctx)
-                .with_context(|| format!("pipeline {}", a.pipeline.display()))?;
+            let summary = match run_pipeline(&registry, &a.pipeline, g.force, ctx) {
+                Ok(s) => s,
+                // Mistakes in the file already name it.
+                Err(e @ cocog_pipeline::runner::RunError::Pipeline { .. }) => return Err(e.into()),
+                Err(e) => {
+                    return Err(
+                        anyhow::Error::new(e).context(format!("pipeline {}", a.pipeline.display()))
+                    );
+                }
+            };
             let out = summary.get("output").and_then(Value::as_str).unwrap_or("");
             print_result(g, &summary, Path::new(out))
         }

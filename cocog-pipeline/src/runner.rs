@@ -13,7 +13,7 @@ use crate::context::Context;
 use crate::options::Options;
 use crate::registry::{Registry, RegistryError, StageEntry};
 use crate::scene::{HistoryEntry, MANIFEST, Scene, SceneError};
-use crate::stage::{OutputKind, StageError, StageRequest};
+use crate::stage::{OutputKind, StageError, StageKind, StageRequest};
 
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {
@@ -209,6 +209,21 @@ pub fn run_pipeline(
         .iter()
         .map(|s| registry.resolve(s))
         .collect::<Result<Vec<_>, _>>()?;
+    // Every stage but the last hands a scene to the next; renders, exports and scores do not.
+    let chain = header.stages.iter().zip(&entries);
+    for (name, entry) in chain.take(header.stages.len() - 1) {
+        let kind = entry.info.kind;
+        if !matches!(
+            kind,
+            StageKind::Ingest | StageKind::Transform | StageKind::Train
+        ) {
+            return Err(bad(format!(
+                "stage '{name}' ({kind:?}) does not write a scene, so no stage can follow it; \
+                 put it last, or run it separately on an intermediate scene in {}",
+                work.display()
+            )));
+        }
+    }
     let mut input = base.join(&header.input);
     let mut done = Vec::new();
     for (i, (name, entry)) in header.stages.iter().zip(entries).enumerate() {

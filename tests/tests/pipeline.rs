@@ -101,6 +101,19 @@ fn pipeline_mistakes_fail_before_any_stage_runs() {
         stderr(&out)
     );
 
+    std::fs::write(
+        &pipeline,
+        "[pipeline]\ninput = \"dataset\"\noutput = \"out\"\nstages = [\"ingest-colmap\", \"render\", \"eval-scene\"]\n",
+    )
+    .expect("write");
+    let out = cocog(&["run", path_str(&pipeline)]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        stderr(&out).contains("'render'") && stderr(&out).contains("does not write a scene"),
+        "{}",
+        stderr(&out)
+    );
+
     std::fs::write(&pipeline, "[pipeline]\ninput = 3\n").expect("write");
     let out = cocog(&["run", path_str(&pipeline)]);
     assert_eq!(out.status.code(), Some(1));
