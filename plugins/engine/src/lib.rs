@@ -39,8 +39,8 @@ mod types;
 pub use error::EngineError;
 pub use gpu::{
     Adam, AdamConfig, AdamMoments, Batch, ForwardState, GpuBuffer, GpuContext, Gradients,
-    ImageLoss, ImageSpec, LossOutput, MemoryTracker, ParamBuffers, PrefixSum, RadixSort,
-    RenderedImage, Renderer, SortBuffers, test_gpu,
+    ImageLoss, ImageSpec, Kernel, LossOutput, MemoryTracker, ParamBuffers, PrefixSum, RadixSort,
+    RenderedImage, Renderer, SortBuffers, shader, test_gpu,
 };
 pub use types::{
     ALPHA_MAX, ALPHA_MIN, Camera, GaussianGrads, GaussianParams, LOW_PASS, MAX_SH_DEGREE,

@@ -17,7 +17,6 @@ mod config;
 mod densify;
 mod error;
 mod init;
-mod kernel;
 mod order;
 mod stage;
 mod stats;

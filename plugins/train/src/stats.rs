@@ -1,9 +1,8 @@
 //! Densification statistics accumulated on the GPU every iteration; see stats.wgsl.
 
-use cocog_engine::{ForwardState, GpuBuffer, GpuContext, Gradients};
+use cocog_engine::{ForwardState, GpuBuffer, GpuContext, Gradients, Kernel, shader};
 
 use crate::TrainError;
-use crate::kernel::Kernel;
 
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
@@ -23,10 +22,18 @@ pub struct GradStats {
     len: u32,
 }
 
+fn accumulate_kernel(ctx: &GpuContext) -> Kernel {
+    Kernel::new(
+        ctx,
+        &shader(ctx, "stats", include_str!("stats.wgsl")),
+        "accumulate",
+    )
+}
+
 impl GradStats {
     pub fn new(ctx: &GpuContext, num_gaussians: u32) -> Self {
         Self {
-            kernel: Kernel::new(ctx, include_str!("stats.wgsl"), "accumulate"),
+            kernel: accumulate_kernel(ctx),
             accum: ctx.storage("grad accum", u64::from(num_gaussians) * 4),
             denom: ctx.storage("grad denom", u64::from(num_gaussians) * 4),
             len: num_gaussians,
@@ -36,7 +43,7 @@ impl GradStats {
     /// Statistics restored from a checkpoint (`read_raw`'s output).
     pub fn from_raw(ctx: &GpuContext, accum: &[f32], denom: &[f32]) -> Self {
         Self {
-            kernel: Kernel::new(ctx, include_str!("stats.wgsl"), "accumulate"),
+            kernel: accumulate_kernel(ctx),
             accum: ctx.storage_from("grad accum", accum),
             denom: ctx.storage_from("grad denom", denom),
             len: accum.len() as u32,
@@ -72,14 +79,16 @@ impl GradStats {
             pad: 0,
         };
         let mut enc = ctx.device.create_command_encoder(&Default::default());
-        let buffers = [
-            &state.projected.buffer,
-            &grads.v_projected.buffer,
-            &self.accum.buffer,
-            &self.denom.buffer,
+        let uniform = ctx.uniform(&params);
+        let bindings = [
+            (0, &uniform),
+            (1, &state.projected.buffer),
+            (2, &grads.v_projected.buffer),
+            (3, &self.accum.buffer),
+            (4, &self.denom.buffer),
         ];
         self.kernel
-            .dispatch_1d(ctx, &mut enc, &params, &buffers, self.len);
+            .dispatch_1d(ctx, &mut enc, &bindings, self.len.div_ceil(256));
         ctx.queue.submit([enc.finish()]);
     }
 

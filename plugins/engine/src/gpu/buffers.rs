@@ -105,7 +105,7 @@ impl GpuContext {
 
     /// A small uniform buffer; each dispatch gets its own because queued writes to one buffer
     /// would all land before the submission runs.
-    pub(crate) fn uniform<T: bytemuck::Pod>(&self, value: &T) -> wgpu::Buffer {
+    pub fn uniform<T: bytemuck::Pod>(&self, value: &T) -> wgpu::Buffer {
         self.device
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("params"),

@@ -5,15 +5,15 @@ use super::GpuContext;
 /// Workgroups along x before a 1D grid spills into y (WebGPU's per-dimension limit).
 const MAX_GRID_X: u32 = 65_535;
 
-/// One compute entry point.
+/// One compute entry point; stages with shaders of their own (train's statistics) use it too.
 #[derive(Debug)]
-pub(crate) struct Kernel {
+pub struct Kernel {
     pipeline: wgpu::ComputePipeline,
     label: &'static str,
 }
 
 impl Kernel {
-    pub(crate) fn new(ctx: &GpuContext, module: &wgpu::ShaderModule, entry: &'static str) -> Self {
+    pub fn new(ctx: &GpuContext, module: &wgpu::ShaderModule, entry: &'static str) -> Self {
         let pipeline = ctx
             .device
             .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
@@ -32,7 +32,7 @@ impl Kernel {
 
     /// Binds `(binding, buffer)` pairs to group 0 and dispatches `workgroups` (a 1D count that
     /// is folded into a 2D grid when too large; kernels rebuild the linear index).
-    pub(crate) fn dispatch_1d(
+    pub fn dispatch_1d(
         &self,
         ctx: &GpuContext,
         encoder: &mut wgpu::CommandEncoder,
@@ -46,7 +46,7 @@ impl Kernel {
         self.dispatch(ctx, encoder, bindings, [x, workgroups.div_ceil(x), 1]);
     }
 
-    pub(crate) fn dispatch(
+    pub fn dispatch(
         &self,
         ctx: &GpuContext,
         encoder: &mut wgpu::CommandEncoder,
@@ -78,7 +78,8 @@ impl Kernel {
     }
 }
 
-pub(crate) fn shader(ctx: &GpuContext, label: &str, source: &str) -> wgpu::ShaderModule {
+/// Compiles WGSL `source`.
+pub fn shader(ctx: &GpuContext, label: &str, source: &str) -> wgpu::ShaderModule {
     ctx.device
         .create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some(label),

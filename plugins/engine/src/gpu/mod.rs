@@ -15,6 +15,7 @@ pub use adam::{Adam, AdamConfig, AdamMoments};
 pub use batch::{Batch, ImageSpec, ParamBuffers};
 pub use buffers::{GpuBuffer, MemoryTracker};
 pub use context::{GpuContext, test_gpu};
+pub use kernel::{Kernel, shader};
 pub use loss::{ImageLoss, LossOutput};
 pub use renderer::Renderer;
 pub use scan::PrefixSum;
