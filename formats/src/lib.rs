@@ -12,6 +12,7 @@ pub mod llff;
 pub mod nerf;
 pub mod ply;
 pub mod pose;
+pub mod rng;
 pub mod splats;
 
 pub use atomic::write_atomic;

@@ -2,6 +2,7 @@
 //! bounding box of the cloud, coloured from their 4 nearest points, dropped when none is near.
 
 use cocog_formats::PointCloud;
+pub use cocog_formats::rng::SplitMix64;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use std::num::NonZero;
 
@@ -9,29 +10,6 @@ use std::num::NonZero;
 const NEIGHBOURS: usize = 4;
 /// Points ignored at each end of every axis when choosing the box (`pts_add_bound`).
 const TRIM: usize = 10;
-
-/// SplitMix64: a tiny, fully specified generator, so a seed gives the same points on every
-/// platform and every version (rand's `StdRng` does not promise that).
-pub struct SplitMix64(u64);
-
-impl SplitMix64 {
-    pub fn new(seed: u64) -> Self {
-        Self(seed)
-    }
-
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [0, 1) with 53 random bits.
-    pub fn next_f64(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
 
 /// The box between the `TRIM`-th smallest and largest coordinate on each axis, which keeps a
 /// few outlier points from inflating it.

@@ -1,31 +1,29 @@
-//! A tiny seeded generator: datasets must be byte-identical across platforms and crate
-//! versions, which an external RNG crate does not promise.
+//! The dataset generator's draws: cocog's SplitMix64 with the samplers the scene needs.
+//! Datasets must be byte-identical across platforms and versions.
 
-/// SplitMix64 (Steele, Lea & Flood 2014): one 64-bit state, full period, good enough
-/// statistics for placing and colouring Gaussians.
+use cocog_formats::rng::SplitMix64;
+
 #[derive(Clone, Debug)]
-pub struct Rng(u64);
+pub struct Rng(SplitMix64);
 
 impl Rng {
     /// An independent stream for `tag`, so adding draws to one part of the scene does not
     /// shift every other part.
     pub fn fork(seed: u64, tag: u64) -> Self {
-        let mut r = Self(seed ^ tag.wrapping_mul(0xA24B_AED4_963E_E407));
+        let mut r = Self(SplitMix64::new(
+            seed ^ tag.wrapping_mul(0xA24B_AED4_963E_E407),
+        ));
         r.next_u64();
         r
     }
 
     pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
+        self.0.next_u64()
     }
 
     /// Uniform in [0, 1) with 53 random bits.
     pub fn unit(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+        self.0.next_f64()
     }
 
     pub fn range(&mut self, lo: f64, hi: f64) -> f64 {

@@ -1,37 +1,6 @@
-//! Seeded randomness: the generator and INRIA's view order.
+//! INRIA's view order, seeded.
 
-/// SplitMix64: tiny, fast and reproducible across platforms, which is all the trainer needs.
-#[derive(Clone, Debug)]
-pub struct SplitMix64(u64);
-
-impl SplitMix64 {
-    pub fn new(seed: u64) -> Self {
-        Self(seed)
-    }
-
-    /// The internal state; `SplitMix64::new(state)` continues the sequence from here.
-    pub fn state(&self) -> u64 {
-        self.0
-    }
-
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [0, 1).
-    pub fn next_f64(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    /// Uniform in `0..n` (`n` > 0); the modulo bias is below 2⁻⁵⁰ for any realistic view count.
-    pub fn below(&mut self, n: usize) -> usize {
-        (self.next_u64() % n as u64) as usize
-    }
-}
+pub use cocog_formats::rng::SplitMix64;
 
 /// INRIA's `viewpoint_stack`: every epoch visits each view once, in a random order, by popping
 /// a random entry of a list refilled when empty.
@@ -73,7 +42,8 @@ impl ViewOrder {
         if self.stack.is_empty() {
             self.stack.extend(0..self.views);
         }
-        let i = self.rng.below(self.stack.len());
+        // The modulo bias is below 2⁻⁵⁰ for any realistic view count.
+        let i = (self.rng.next_u64() % self.stack.len() as u64) as usize;
         Some(self.stack.remove(i))
     }
 }

@@ -3,25 +3,21 @@
 
 use cocog_engine::{Camera, GaussianParams, sh_coeffs_per_channel};
 
-/// SplitMix64: deterministic and dependency-free.
-pub struct Rng(u64);
+/// cocog's seeded generator with the ranges the tests draw from.
+pub struct Rng(cocog_formats::rng::SplitMix64);
 
 impl Rng {
     pub fn new(seed: u64) -> Self {
-        Self(seed)
+        Self(cocog_formats::rng::SplitMix64::new(seed))
     }
 
     pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
+        self.0.next_u64()
     }
 
     /// Uniform in [lo, hi).
     pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+        lo + (hi - lo) * self.0.next_f64()
     }
 
     pub fn range_f32(&mut self, lo: f64, hi: f64) -> f32 {
