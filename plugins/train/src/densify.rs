@@ -204,22 +204,5 @@ fn normal(rng: &mut SplitMix64) -> f64 {
 fn rotation(q: [f32; 4]) -> [[f64; 3]; 3] {
     let q = q.map(f64::from);
     let len = q.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-12);
-    let [r, x, y, z] = q.map(|v| v / len);
-    [
-        [
-            1.0 - 2.0 * (y * y + z * z),
-            2.0 * (x * y - r * z),
-            2.0 * (x * z + r * y),
-        ],
-        [
-            2.0 * (x * y + r * z),
-            1.0 - 2.0 * (x * x + z * z),
-            2.0 * (y * z - r * x),
-        ],
-        [
-            2.0 * (x * z - r * y),
-            2.0 * (y * z + r * x),
-            1.0 - 2.0 * (x * x + y * y),
-        ],
-    ]
+    cocog_engine::reference::quat_to_rot(q.map(|v| v / len))
 }

@@ -9,7 +9,7 @@ mod project;
 mod raster;
 pub mod sh;
 
-pub use project::{Projected, ProjectedGrad, project, project_backward};
+pub use project::{Projected, ProjectedGrad, project, project_backward, quat_to_rot};
 pub use raster::{Image64, raster_backward, render, render_backward};
 
 use crate::types::{GaussianGrads, GaussianParams};

@@ -50,7 +50,8 @@ struct Fwd {
     out: Projected,
 }
 
-fn quat_to_rot(q: [f64; 4]) -> M3 {
+/// Rotation matrix of a unit (w, x, y, z) quaternion.
+pub fn quat_to_rot(q: [f64; 4]) -> M3 {
     let [w, x, y, z] = q;
     [
         [
