@@ -15,6 +15,7 @@ pub mod registry;
 pub mod runner;
 pub mod scene;
 pub mod stage;
+pub mod testing;
 
 pub use context::{Context, LogLevel, NullContext};
 pub use options::{OptionKind, OptionSpec, Options};

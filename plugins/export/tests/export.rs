@@ -4,7 +4,7 @@ use std::path::Path;
 
 use cocog_export::{Export, axis_name};
 use cocog_formats::splats::Splats;
-use cocog_pipeline::{Camera, NullContext, Options, Scene, Split, Stage, StageRequest, View};
+use cocog_pipeline::{NullContext, Options, Stage, StageRequest};
 use serde_json::json;
 
 fn scene_with_gaussians(dir: &Path, with: bool) -> Splats {
@@ -18,31 +18,7 @@ fn scene_with_gaussians(dir: &Path, with: bool) -> Splats {
         s.sh_rest.extend((0..9).map(|k| k as f32 * 0.01));
     }
     std::fs::create_dir_all(dir).unwrap();
-    let mut scene = Scene::default();
-    scene.cameras.push(Camera {
-        id: 1,
-        width: 4,
-        height: 3,
-        fx: 2.0,
-        fy: 2.0,
-        cx: 2.0,
-        cy: 1.5,
-    });
-    let pose = [
-        [1.0, 0.0, 0.0, 0.0],
-        [0.0, 1.0, 0.0, 0.0],
-        [0.0, 0.0, 1.0, 0.0],
-        [0.0, 0.0, 0.0, 1.0],
-    ];
-    scene.views.push(View {
-        name: "a.png".into(),
-        image: "a.png".into(),
-        camera: 1,
-        world_from_camera: pose,
-        split: Split::Train,
-        lens: None,
-        depth: None,
-    });
+    let mut scene = cocog_pipeline::testing::one_view_scene();
     scene.up = Some([0.1, -0.2, 0.95]);
     if with {
         cocog_formats::ply::write_splats(&dir.join("g.ply"), &s, None).unwrap();

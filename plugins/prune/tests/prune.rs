@@ -1,7 +1,7 @@
 //! The pruning rule against hand-computed cases, and the stage end to end on a small scene.
 
 use cocog_formats::splats::{Splats, logit};
-use cocog_pipeline::{Camera, NullContext, Options, Scene, Split, Stage, StageRequest, View};
+use cocog_pipeline::{NullContext, Options, Scene, Stage, StageRequest};
 use cocog_prune::{Prune, keep_mask, retain};
 use serde_json::json;
 
@@ -55,31 +55,7 @@ fn stage_prunes_the_scene_gaussians() {
     std::fs::create_dir(&input).unwrap();
     let s = splats(&[(0.0, 0.001), (1.0, 0.9), (2.0, 0.5)]);
     cocog_formats::ply::write_splats(&input.join("gaussians.ply"), &s, None).unwrap();
-    let mut scene = Scene::default();
-    scene.cameras.push(Camera {
-        id: 1,
-        width: 4,
-        height: 3,
-        fx: 2.0,
-        fy: 2.0,
-        cx: 2.0,
-        cy: 1.5,
-    });
-    let pose = [
-        [1.0, 0.0, 0.0, 0.0],
-        [0.0, 1.0, 0.0, 0.0],
-        [0.0, 0.0, 1.0, 0.0],
-        [0.0, 0.0, 0.0, 1.0],
-    ];
-    scene.views.push(View {
-        name: "a.png".into(),
-        image: "a.png".into(),
-        camera: 1,
-        world_from_camera: pose,
-        split: Split::Train,
-        lens: None,
-        depth: None,
-    });
+    let mut scene = cocog_pipeline::testing::one_view_scene();
     scene.gaussians = Some("gaussians.ply".into());
     scene.save(&input).unwrap();
     let out = tmp.path().join("out");
