@@ -198,6 +198,75 @@ pub struct TrainArgs {
     /// Default 1000.
     #[arg(long = "checkpoint-every")]
     pub checkpoint_every: Option<u64>,
+    #[command(flatten)]
+    pub schedule: ScheduleArgs,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+pub enum SchedulePreset {
+    /// INRIA's rules without the large-Gaussian prune, which on forward-facing captures
+    /// deletes the background after the first opacity reset (measured: BENCHMARKS.md).
+    Auto,
+    /// INRIA 3DGS (2023) exactly, for comparison.
+    Inria,
+}
+
+/// Density control and its schedule. Each flag overrides one constant of the preset; the
+/// full schedule a run used, scene scale included, is in the output's scene.json history.
+#[derive(Args)]
+#[command(next_help_heading = "Density schedule")]
+pub struct ScheduleArgs {
+    /// Preset for every constant below. Default auto.
+    #[arg(long, value_enum)]
+    pub schedule: Option<SchedulePreset>,
+    /// What the position learning rate and the world-space rules (clone/split boundary,
+    /// large-Gaussian prune) scale with: `extent` (INRIA: 1.1 × the largest camera distance
+    /// from their mean), `depth` (the larger of that and the points' median distance from the
+    /// cameras), or a length in scene units. Default extent.
+    #[arg(long = "scene-scale")]
+    pub scene_scale: Option<String>,
+    /// Densify after this iteration. Default 500.
+    #[arg(long = "densify-from")]
+    pub densify_from: Option<u64>,
+    /// Densify (and reset opacities) only before this iteration. Default 15000.
+    #[arg(long = "densify-until")]
+    pub densify_until: Option<u64>,
+    /// Iterations between densifications. Default 100.
+    #[arg(long = "densify-every")]
+    pub densify_every: Option<u64>,
+    /// Mean view-space gradient at which a Gaussian is cloned (small) or split (large).
+    /// Default 0.0002.
+    #[arg(long = "densify-grad", value_parser = finite)]
+    pub densify_grad: Option<f64>,
+    /// Largest scale, × scene scale, of a Gaussian that is cloned rather than split.
+    /// Default 0.01.
+    #[arg(long = "percent-dense", value_parser = finite)]
+    pub percent_dense: Option<f64>,
+    /// Prune Gaussians below this opacity when densifying. Default 0.005.
+    #[arg(long = "prune-opacity", value_parser = finite)]
+    pub prune_opacity: Option<f64>,
+    /// Prune Gaussians larger than this × scene scale, from the first opacity reset on
+    /// (from the first densification when resets are off); 0 turns it off. Default 0 (auto),
+    /// 0.1 (inria): on a capture around an object 0.1 removes large floaters.
+    #[arg(long = "prune-large", value_parser = finite)]
+    pub prune_large: Option<f64>,
+    /// Clamp every opacity to 0.01 each N iterations while densifying; 0 never.
+    /// Default 3000.
+    #[arg(long = "opacity-reset-every")]
+    pub opacity_reset_every: Option<u64>,
+    /// Raise the spherical-harmonics degree every N iterations. Default 1000.
+    #[arg(long = "sh-every")]
+    pub sh_every: Option<u64>,
+}
+
+/// A number that is not NaN or infinite (JSON cannot carry those, and they mean nothing here).
+fn finite(s: &str) -> Result<f64, String> {
+    let v: f64 = s.parse().map_err(|e| format!("{e}"))?;
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(format!("{s} is not a finite number"))
+    }
 }
 
 #[derive(Clone, Copy, ValueEnum)]

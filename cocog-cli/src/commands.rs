@@ -10,7 +10,9 @@ use cocog_pipeline::{Context, Registry, StageEntry};
 use serde_json::{Map, Value};
 
 use crate::builtins;
-use crate::cli::{Cli, Command, ConvertTarget, DatasetFormat, ExportFormat, Global, Method};
+use crate::cli::{
+    Cli, Command, ConvertTarget, DatasetFormat, ExportFormat, Global, Method, SchedulePreset,
+};
 use crate::{demo, plugins};
 
 /// A mistake on the command line that clap cannot see (exit code 2).
@@ -66,7 +68,7 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
             // and the checkpoint is what lets an interrupted run continue.
             let mut checkpoint_dir = a.io.output.clone().into_os_string();
             checkpoint_dir.push(".checkpoint");
-            let o = options! {
+            let mut o = options! {
                 "method" => method, "iterations" => a.iterations,
                 "coc_gaussians" => a.coc_gaussians, "downscale" => a.downscale, "seed" => a.seed,
                 "sh_degree" => a.sh_degree,
@@ -75,6 +77,19 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
                 "checkpoint_every" => a.checkpoint_every,
                 "checkpoint_dir" => Some(std::path::PathBuf::from(checkpoint_dir).display().to_string()),
             };
+            let s = &a.schedule;
+            let preset = s.schedule.map(|p| match p {
+                SchedulePreset::Auto => "auto",
+                SchedulePreset::Inria => "inria",
+            });
+            o.extend(options! {
+                "schedule" => preset, "scene_scale" => s.scene_scale.clone(),
+                "densify_from" => s.densify_from, "densify_until" => s.densify_until,
+                "densify_every" => s.densify_every, "densify_grad" => s.densify_grad,
+                "percent_dense" => s.percent_dense, "prune_opacity" => s.prune_opacity,
+                "prune_large" => s.prune_large, "opacity_reset_every" => s.opacity_reset_every,
+                "sh_every" => s.sh_every,
+            });
             run("train", &a.io.scene, &a.io.output, o)
         }
         Command::Prune(a) => {

@@ -119,7 +119,13 @@ pub fn run_stage(
         }
     };
     if entry.info.output == OutputKind::Dir && staging.path().join(MANIFEST).exists() {
-        record_history(staging.path(), entry, input, &req.options)?;
+        record_history(
+            staging.path(),
+            entry,
+            input,
+            &req.options,
+            summary.get("resolved"),
+        )?;
     }
     staging
         .commit(output, force)
@@ -135,6 +141,7 @@ fn record_history(
     entry: &StageEntry,
     input: &Path,
     options: &Options,
+    resolved: Option<&Value>,
 ) -> Result<(), SceneError> {
     let mut scene = Scene::load(dir)?;
     let finished_at = SystemTime::now()
@@ -145,6 +152,7 @@ fn record_history(
         provider: entry.provider.to_string(),
         input: input.display().to_string(),
         options: serde_json::to_value(options).unwrap_or(Value::Null),
+        resolved: resolved.cloned(),
         cocog_version: crate::VERSION.to_owned(),
         finished_at,
     });

@@ -94,6 +94,10 @@ pub struct HistoryEntry {
     pub provider: String,
     pub input: String,
     pub options: Value,
+    /// What the stage made of its options where that depends on the input (e.g. train's full
+    /// schedule with the scene scale it derived), so the history alone reproduces the run.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub resolved: Option<Value>,
     pub cocog_version: String,
     /// Seconds since the Unix epoch.
     pub finished_at: u64,

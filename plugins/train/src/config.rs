@@ -8,7 +8,7 @@ use crate::DensifyConfig;
 pub struct TrainConfig {
     /// Length of the run; the position learning rate decays over exactly this many steps.
     pub iterations: u32,
-    /// Position learning rate at step 0 and at `iterations`, both × scene extent.
+    /// Position learning rate at step 0 and at `iterations`, both × the scene scale.
     pub position_lr_init: f64,
     pub position_lr_final: f64,
     /// SH DC learning rate; the higher-order coefficients use it / 20.
@@ -32,6 +32,9 @@ pub struct TrainConfig {
     pub loss_every: u32,
     /// Adaptive density control; `None` trains a fixed set of Gaussians.
     pub densify: Option<DensifyConfig>,
+    /// The length (scene units) that the position learning rate and the world-space density
+    /// rules scale with; `None` takes INRIA's camera extent (`scene_extent`).
+    pub scene_scale: Option<f64>,
 }
 
 impl Default for TrainConfig {
@@ -52,6 +55,7 @@ impl Default for TrainConfig {
             seed: 0,
             loss_every: 100,
             densify: Some(DensifyConfig::default()),
+            scene_scale: None,
         }
     }
 }

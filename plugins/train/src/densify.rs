@@ -19,9 +19,12 @@ pub struct DensifyConfig {
     pub from_iter: u32,
     pub until_iter: u32,
     pub interval: u32,
-    /// Opacities are clamped to 0.01 every this many iterations (below `until_iter`); after
-    /// the first reset, Gaussians larger than 0.1 × extent in world space are pruned too.
+    /// Opacities are clamped to 0.01 every this many iterations (below `until_iter`); 0 never.
     pub opacity_reset_interval: u32,
+    /// Gaussians whose largest scale exceeds this × the scene scale are pruned, from the
+    /// first opacity reset on (INRIA: 0.1), or from the first densification when resets are
+    /// off; 0 turns the rule off.
+    pub prune_large: f32,
 }
 
 impl Default for DensifyConfig {
@@ -34,6 +37,7 @@ impl Default for DensifyConfig {
             until_iter: 15_000,
             interval: 100,
             opacity_reset_interval: 3000,
+            prune_large: 0.1,
         }
     }
 }
@@ -44,7 +48,15 @@ impl DensifyConfig {
     }
 
     pub fn resets_opacity_at(&self, it: u32) -> bool {
-        it < self.until_iter && it.is_multiple_of(self.opacity_reset_interval.max(1))
+        self.opacity_reset_interval > 0
+            && it < self.until_iter
+            && it.is_multiple_of(self.opacity_reset_interval)
+    }
+
+    /// Whether densifying at `it` also prunes large Gaussians: INRIA passes its size
+    /// threshold once iteration `opacity_reset_interval` is past.
+    pub fn prunes_large_at(&self, it: u32) -> bool {
+        self.prune_large > 0.0 && it > self.opacity_reset_interval
     }
 }
 
@@ -83,19 +95,20 @@ pub struct DensifyPlan {
 const SPLIT_CHILDREN: usize = 2;
 const SPLIT_SCALE_DIV: f32 = 0.8 * SPLIT_CHILDREN as f32;
 
-/// INRIA `densify_and_prune`. `prune_large` is INRIA's `max_screen_size` branch (after the
-/// first opacity reset); only its world-space test is modelled, because INRIA zeroes
-/// `max_radii2D` in `densification_postfix` just before it, so its screen-size test never fires.
+/// INRIA `densify_and_prune` with world-space rules relative to `scale` (INRIA: the camera
+/// extent). `prune_large` is INRIA's `max_screen_size` branch (`DensifyConfig::prunes_large_at`);
+/// only its world-space test is modelled, because INRIA zeroes `max_radii2D` in
+/// `densification_postfix` just before it, so its screen-size test never fires.
 pub fn plan_densify(
     g: &GaussianParams,
     mean_grads: &[f32],
-    extent: f64,
+    scale: f64,
     prune_large: bool,
     config: &DensifyConfig,
     rng: &mut SplitMix64,
 ) -> DensifyPlan {
     let n = g.len();
-    let dense = (f64::from(config.percent_dense) * extent) as f32;
+    let dense = (f64::from(config.percent_dense) * scale) as f32;
     let max_scale = |l: &[f32; 3]| l.iter().fold(f32::MIN, |m, &v| m.max(v.exp()));
     let hot = |i: usize| {
         mean_grads
@@ -132,7 +145,7 @@ pub fn plan_densify(
         }
     }
     let before = origins.len();
-    let large = (0.1 * extent) as f32;
+    let large = (f64::from(config.prune_large) * scale) as f32;
     origins.retain(|o| {
         let opacity = sigmoid(g.opacity_logits[o.source()]);
         let log_scale = match o {

@@ -143,14 +143,16 @@ pub struct Trainer<'c> {
     /// Densification statistics and the split sampler.
     stats: GradStats,
     rng: SplitMix64,
-    extent: f64,
+    /// The length the world-space rules and the position learning rate are relative to.
+    scene_scale: f64,
     iteration: u32,
     profiling: bool,
 }
 
 impl<'c> Trainer<'c> {
     /// Uploads `init` and the target images. All views must share one resolution (the engine
-    /// batches by resolution); the scene extent comes from their camera centres.
+    /// batches by resolution); the scene scale is `config.scene_scale`, or INRIA's camera
+    /// extent of their centres when that is `None`.
     pub fn new(
         ctx: &'c GpuContext,
         init: &GaussianParams,
@@ -180,7 +182,15 @@ impl<'c> Trainer<'c> {
     ) -> Result<Self, TrainError> {
         let (w, h) = (views[0].camera.width, views[0].camera.height);
         let cameras: Vec<Camera> = views.iter().map(|v| v.camera).collect();
-        let extent = scene_extent(&cameras)?;
+        let scene_scale = match config.scene_scale {
+            Some(s) if s.is_finite() && s > 0.0 => s,
+            Some(s) => {
+                return Err(TrainError::Invalid(format!(
+                    "scene scale {s} (must be a positive length)"
+                )));
+            }
+            None => scene_extent(&cameras)?,
+        };
         let targets = views
             .iter()
             .map(|v| {
@@ -201,7 +211,7 @@ impl<'c> Trainer<'c> {
             params: Some(state.params),
             order: state.order,
             cameras,
-            extent,
+            scene_scale,
             iteration: state.iteration,
             profiling: false,
             config,
@@ -218,14 +228,18 @@ impl<'c> Trainer<'c> {
         &self.config
     }
 
-    /// Scene extent (INRIA radius) the position learning rate is scaled by.
-    pub fn extent(&self) -> f64 {
-        self.extent
+    /// The scene scale the position learning rate and the world-space density rules use.
+    pub fn scene_scale(&self) -> f64 {
+        self.scene_scale
     }
 
     /// Iterations completed.
     pub fn iteration(&self) -> u32 {
         self.iteration
+    }
+
+    pub fn num_views(&self) -> usize {
+        self.cameras.len()
     }
 
     pub fn sh_degree(&self) -> u32 {
@@ -381,7 +395,12 @@ impl<'c> Trainer<'c> {
         let lr = AdamConfig::with_lr;
         let mut enc = ctx.device.create_command_encoder(&Default::default());
         let groups = [
-            (&p.means, &g.means, &m.means, c.position_lr(it, self.extent)),
+            (
+                &p.means,
+                &g.means,
+                &m.means,
+                c.position_lr(it, self.scene_scale),
+            ),
             (&p.log_scales, &g.log_scales, &m.log_scales, c.scaling_lr),
             (&p.quats, &g.quats, &m.quats, c.rotation_lr),
             (

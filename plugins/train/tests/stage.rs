@@ -63,13 +63,26 @@ fn train_stage_writes_gaussians_log_and_scene() {
     assert!(count > 0);
     assert_eq!(Some(count), summary["gaussians"].as_u64());
     assert_eq!(summary["iterations"], 150);
+    // The schedule is resolved in full for the history: preset, derived scale, constants.
+    let schedule = &summary["resolved"]["schedule"];
+    assert_eq!(schedule["preset"], "auto", "{schedule}");
+    assert!(
+        schedule["scene_scale"].as_f64().unwrap() > 0.0,
+        "{schedule}"
+    );
+    assert_eq!(schedule["opacity_reset_every"], 3000, "{schedule}");
     assert!(summary["it_per_s"].as_f64().unwrap() > 0.0);
 
     let log = std::fs::read_to_string(out.join("train-log.jsonl")).unwrap();
-    let lines: Vec<Value> = log
+    let mut lines: Vec<Value> = log
         .lines()
         .map(|l| serde_json::from_str(l).unwrap())
         .collect();
+    // The last line sums the run up, collapse detection included.
+    let end = lines.pop().unwrap();
+    assert_eq!(end["summary"]["iterations"], 150, "{end}");
+    assert!(end["summary"].get("last_psnr_drop").is_some(), "{end}");
+    assert_eq!(end["summary"]["last_psnr_drop"], summary["last_psnr_drop"]);
     assert!(lines.len() >= 2, "log has {} lines", lines.len());
     let losses: Vec<f64> = lines.iter().map(|l| l["loss"].as_f64().unwrap()).collect();
     eprintln!("logged losses: {losses:.4?}");

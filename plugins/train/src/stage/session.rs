@@ -10,13 +10,14 @@ use cocog_pipeline::{Context, StageError};
 use serde_json::json;
 
 use super::Plan;
-use crate::Trainer;
+use crate::{DROP_DB, DropWatch, PsnrDrop, Trainer};
 
 /// A run in progress and where its side products go.
 pub(super) struct Session<'c> {
     pub trainer: Trainer<'c>,
     downscale: u32,
     iterations: u32,
+    views: usize,
     checkpoint_dir: Option<PathBuf>,
     checkpoint_every: u32,
     log_path: PathBuf,
@@ -29,6 +30,8 @@ pub(super) struct Outcome {
     pub final_psnr: Option<f64>,
     pub seconds: f64,
     pub it_per_s: f64,
+    /// The most recent fall of the smoothed training PSNR by more than `DROP_DB` (a collapse).
+    pub last_drop: Option<PsnrDrop>,
 }
 
 impl<'c> Session<'c> {
@@ -36,6 +39,7 @@ impl<'c> Session<'c> {
         let log_path = output.join("train-log.jsonl");
         let file = File::create(&log_path).map_err(|e| StageError::io(&log_path, e))?;
         Ok(Self {
+            views: trainer.num_views(),
             trainer,
             downscale: plan.downscale,
             iterations: plan.config.iterations,
@@ -51,6 +55,7 @@ impl<'c> Session<'c> {
         let total = self.iterations;
         let start = Instant::now();
         let mut last = (None, None);
+        let mut watch = DropWatch::new(self.views);
         for it in first..=total {
             if ctx.cancelled() {
                 self.save_on_interrupt(ctx)?;
@@ -74,28 +79,58 @@ impl<'c> Session<'c> {
                     "it_per_s": rate,
                 });
                 writeln!(self.log, "{line}").map_err(|e| StageError::io(&self.log_path, e))?;
-                ctx.info(&format!(
-                    "iteration {it}/{total}: loss {loss:.5}, PSNR {:.2} dB, {} Gaussians, \
+                if let Some(drop) = psnr.and_then(|p| watch.observe(it, p)) {
+                    ctx.warn(&drop_message(&drop));
+                }
+                // Every reading goes to the log file; every fifth to the terminal.
+                let every = 5 * self.trainer.config().loss_every.max(1);
+                if it % every == 0 || it == total {
+                    ctx.info(&format!(
+                        "iteration {it}/{total}: loss {loss:.5}, PSNR {:.2} dB, {} Gaussians, \
                      {rate:.1} it/s",
-                    psnr.unwrap_or(f64::NAN),
-                    stats.num_gaussians
-                ));
+                        psnr.unwrap_or(f64::NAN),
+                        stats.num_gaussians
+                    ));
+                }
             }
             let due = self.checkpoint_every > 0 && it % self.checkpoint_every == 0 && it < total;
             if let Some(dir) = self.checkpoint_dir.clone().filter(|_| due) {
                 self.save(&dir)?;
             }
         }
-        self.log
-            .flush()
-            .map_err(|e| StageError::io(&self.log_path, e))?;
         let seconds = start.elapsed().as_secs_f64();
-        Ok(Outcome {
+        let outcome = Outcome {
             final_loss: last.0,
             final_psnr: last.1,
             seconds,
             it_per_s: f64::from(total - first + 1) / seconds.max(1e-9),
-        })
+            last_drop: watch.last(),
+        };
+        let summary = json!({
+            "summary": {
+                "iterations": total,
+                "final_loss": outcome.final_loss,
+                "final_psnr": outcome.final_psnr,
+                "seconds": seconds,
+                "it_per_s": outcome.it_per_s,
+                "last_psnr_drop": outcome.last_drop.map(|d| d.iteration),
+            }
+        });
+        writeln!(self.log, "{summary}").map_err(|e| StageError::io(&self.log_path, e))?;
+        self.log
+            .flush()
+            .map_err(|e| StageError::io(&self.log_path, e))?;
+        match &outcome.last_drop {
+            Some(d) => ctx.warn(&format!(
+                "training PSNR last fell more than {DROP_DB} dB at iteration {} ({:.2} dB, best \
+                 {:.2} dB at {}); see train-log.jsonl",
+                d.iteration, d.smoothed, d.best, d.best_iteration
+            )),
+            None => ctx.info(&format!(
+                "training PSNR never fell more than {DROP_DB} dB below its best"
+            )),
+        }
+        Ok(outcome)
     }
 
     /// Replaces `dir` with the current state, atomically: an interruption while writing
@@ -141,4 +176,13 @@ impl<'c> Session<'c> {
         }
         Ok(())
     }
+}
+
+fn drop_message(d: &PsnrDrop) -> String {
+    format!(
+        "iteration {}: training PSNR (mean of the last readings) fell to {:.2} dB, more than \
+         {DROP_DB} dB below its best {:.2} dB at iteration {}; if it does not recover, the \
+         density schedule does not suit this scene (see `cocog train --help`, --schedule)",
+        d.iteration, d.smoothed, d.best, d.best_iteration
+    )
 }

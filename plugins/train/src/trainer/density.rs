@@ -44,9 +44,15 @@ impl Trainer<'_> {
         let ctx = self.ctx;
         let g = self.gaussians()?;
         let grads = self.stats.read_mean(ctx)?;
-        // INRIA passes max_screen_size only once the first opacity reset has happened.
-        let prune_large = it > config.opacity_reset_interval;
-        let plan = plan_densify(&g, &grads, self.extent, prune_large, config, &mut self.rng);
+        let prune_large = config.prunes_large_at(it);
+        let plan = plan_densify(
+            &g,
+            &grads,
+            self.scene_scale,
+            prune_large,
+            config,
+            &mut self.rng,
+        );
         if plan.origins.is_empty() {
             return Err(TrainError::Invalid(format!(
                 "densification at iteration {it} pruned every Gaussian"
