@@ -96,11 +96,11 @@ pub fn run_bench(
         iterations: start + total,
         max_sh_degree: opts.max_sh_degree,
         loss_every: 0,
-        // Density control from the first iteration, at its usual interval, so a short run
-        // from the SfM points measures it too.
+        // The default schedule, with density control from the first iteration at its usual
+        // interval, so a short run from the SfM points measures it too.
         densify: Some(DensifyConfig {
             from_iter: start.min(500),
-            ..DensifyConfig::default()
+            ..DensifyConfig::auto()
         }),
         ..TrainConfig::default()
     };

@@ -36,16 +36,9 @@ impl Schedule {
         };
         match name {
             "inria" => Ok(inria),
-            // Measured on sharp-dev (BENCHMARKS.md): INRIA's large-Gaussian prune deletes the
-            // background of forward-facing captures (24.0 dB at 30k iterations); without it
-            // 39.3 dB. Scaling the other rules by the depth instead lost 0.9 dB, and dropping
-            // the opacity resets 4.9 dB (100×75, 7000 iterations).
             "auto" => Ok(Self {
                 preset: "auto",
-                densify: DensifyConfig {
-                    prune_large: 0.0,
-                    ..inria.densify.clone()
-                },
+                densify: DensifyConfig::auto(),
                 ..inria
             }),
             other => Err(StageError::Options(format!(
