@@ -13,6 +13,8 @@ pub mod options;
 pub mod plugin;
 pub mod registry;
 pub mod runner;
+#[cfg(test)]
+mod runner_tests;
 pub mod scene;
 pub mod stage;
 pub mod testing;

@@ -1,0 +1,76 @@
+//! The runner's history entry: options as validated, and what the stage resolved.
+
+use std::path::Path;
+use std::sync::Arc;
+
+use serde_json::{Map, Value, json};
+
+use crate::registry::{Provider, StageEntry};
+use crate::runner::run_stage;
+use crate::stage::{OutputKind, StageInfo, StageKind};
+use crate::testing::one_view_scene;
+use crate::{Context, NullContext, OptionSpec, Scene, Stage, StageError, StageRequest};
+
+/// Copies the scene and reports a `resolved` object, as train does with its schedule.
+struct Resolving;
+
+impl Stage for Resolving {
+    fn info(&self) -> StageInfo {
+        StageInfo {
+            name: "resolving".into(),
+            kind: StageKind::Transform,
+            output: OutputKind::Dir,
+            description: "test stage".into(),
+            options: vec![OptionSpec::int("k", 3, "a constant")],
+        }
+    }
+
+    fn run(&self, req: &StageRequest, _ctx: &dyn Context) -> Result<Value, StageError> {
+        Scene::load(&req.input)?.save(&req.output)?;
+        Ok(json!({ "resolved": { "k_times_two": 2 * req.options.get_i64("k").unwrap_or(0) } }))
+    }
+}
+
+fn entry() -> StageEntry {
+    let stage: Arc<dyn Stage> = Arc::new(Resolving);
+    StageEntry {
+        info: stage.info(),
+        stage,
+        provider: Provider::BuiltIn,
+    }
+}
+
+fn run(input: &Path, output: &Path, given: Value) -> Scene {
+    let given: Map<String, Value> = serde_json::from_value(given).unwrap();
+    run_stage(&entry(), input, output, &given, false, &NullContext).unwrap();
+    Scene::load(output).unwrap()
+}
+
+#[test]
+fn history_records_the_options_and_what_the_stage_resolved() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = tmp.path().join("in");
+    std::fs::create_dir(&input).unwrap();
+    one_view_scene().save(&input).unwrap();
+    let out = run(&input, &tmp.path().join("out"), json!({"k": 5}));
+    let entry = out.history.last().unwrap();
+    assert_eq!(entry.stage, "resolving");
+    assert_eq!(entry.options, json!({"k": 5}));
+    assert_eq!(entry.resolved, Some(json!({"k_times_two": 10})));
+    // Defaults are recorded too, and a scene without `resolved` in its history still loads.
+    let again = run(
+        &tmp.path().join("out"),
+        &tmp.path().join("again"),
+        json!({}),
+    );
+    assert_eq!(again.history[1].options, json!({"k": 3}));
+    let text = std::fs::read_to_string(tmp.path().join("again/scene.json")).unwrap();
+    let mut raw: Value = serde_json::from_str(&text).unwrap();
+    raw["history"][0]
+        .as_object_mut()
+        .unwrap()
+        .remove("resolved");
+    std::fs::write(tmp.path().join("again/scene.json"), raw.to_string()).unwrap();
+    let old = Scene::load(&tmp.path().join("again")).unwrap();
+    assert_eq!(old.history[0].resolved, None);
+}
