@@ -12,6 +12,7 @@ pub mod context;
 pub mod options;
 pub mod plugin;
 pub mod registry;
+pub mod replace;
 pub mod runner;
 #[cfg(test)]
 mod runner_tests;

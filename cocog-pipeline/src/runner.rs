@@ -21,6 +21,8 @@ pub enum RunError {
     MissingInput(PathBuf),
     #[error("{0}: output already exists (use --force to replace it)")]
     OutputExists(PathBuf),
+    #[error("{path}: --force will not replace it: {why}")]
+    NotReplaceable { path: PathBuf, why: String },
     #[error("{path}: cannot prepare output: {source}")]
     Prepare {
         path: PathBuf,
@@ -85,6 +87,12 @@ pub fn run_stage(
     if (output.exists() || output.is_symlink()) && !force {
         return Err(RunError::OutputExists(output.to_path_buf()));
     }
+    if let Some(why) = crate::replace::refusal(output, input, entry.info.output) {
+        return Err(RunError::NotReplaceable {
+            path: output.to_path_buf(),
+            why,
+        });
+    }
     let options = Options::validate(&name, &entry.info.options, given).map_err(stage_err)?;
     if let Some(parent) = output.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent).map_err(|source| RunError::Prepare {
@@ -118,6 +126,13 @@ pub fn run_stage(
             });
         }
     };
+    if entry.info.output == OutputKind::Dir && staging.path().is_dir() {
+        let marker = staging.path().join(crate::replace::MARKER);
+        std::fs::write(&marker, b"").map_err(|source| RunError::Prepare {
+            path: output.to_path_buf(),
+            source,
+        })?;
+    }
     if entry.info.output == OutputKind::Dir && staging.path().join(MANIFEST).exists() {
         record_history(
             staging.path(),

@@ -92,10 +92,24 @@ fn output_exists_is_refused_unless_forced() {
         "refused run must not touch the output"
     );
 
+    // A folder of the user's files is not cocog's to replace, even with --force.
     let out = recenter(&input, &output, &["--force"]);
-    assert!(out.status.success(), "{}", stderr(&out));
-    assert!(output.join("scene.json").exists() && !output.join("keep.txt").exists());
-    assert_eq!(listing(work.path()), vec!["out", "scene"]);
+    assert_one_line_error(&out, &["out", "will not replace", "did not write"]);
+    assert_eq!(
+        std::fs::read_to_string(output.join("keep.txt")).unwrap(),
+        "precious"
+    );
+
+    // An output cocog wrote is replaced.
+    let made = work.path().join("made");
+    for extra in [&[][..], &["--force"][..]] {
+        let out = recenter(&input, &made, extra);
+        assert!(out.status.success(), "{}", stderr(&out));
+    }
+    assert!(made.join("scene.json").exists());
+    let mut names = listing(work.path());
+    names.sort();
+    assert_eq!(names, vec!["made", "out", "scene"]);
 }
 
 #[test]

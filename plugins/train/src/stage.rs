@@ -140,6 +140,28 @@ fn plan(req: &StageRequest) -> Result<Plan, StageError> {
     })
 }
 
+/// An interrupted run's checkpoint where this run would keep its own: only a run that
+/// resumes from it may overwrite it (and remove it when it succeeds).
+fn refuse_foreign_checkpoint(plan: &Plan) -> Result<(), StageError> {
+    let Some(dir) = plan.checkpoint_dir.as_ref().filter(|d| d.exists()) else {
+        return Ok(());
+    };
+    let canonical = |p: &std::path::Path| p.canonicalize().unwrap_or_else(|_| p.to_path_buf());
+    let resumes_it = plan
+        .resume
+        .as_deref()
+        .is_some_and(|r| canonical(r).starts_with(canonical(dir)));
+    if resumes_it {
+        return Ok(());
+    }
+    Err(StageError::Options(format!(
+        "{} holds the checkpoint of an interrupted run; continue it with --resume {}, or \
+         remove it to start afresh",
+        dir.display(),
+        dir.display()
+    )))
+}
+
 /// The checkpoint to resume from, refused if it cannot continue this run.
 fn load_resume(plan: &Plan) -> Result<Option<TrainState>, StageError> {
     let Some(path) = &plan.resume else {
@@ -183,6 +205,7 @@ impl Stage for Train {
 
     fn run(&self, req: &StageRequest, ctx: &dyn Context) -> Result<Value, StageError> {
         let mut plan = plan(req)?;
+        refuse_foreign_checkpoint(&plan)?;
         let resume = load_resume(&plan)?;
         let mut scene = Scene::load(&req.input)?;
         scene.rebase(&req.input)?;

@@ -206,6 +206,21 @@ fn an_interrupted_run_leaves_a_checkpoint_that_resumes_to_the_end() {
     let saved = cocog_train::TrainState::load(&ckpt).unwrap();
     assert_eq!(saved.iteration, 30);
 
+    // A fresh run that would keep its checkpoint there refuses, and the checkpoint survives.
+    let err = run(
+        train.as_ref(),
+        &scene_dir,
+        &tmp.path().join("fresh"),
+        options.clone(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("--resume") && err.contains("interrupted"),
+        "{err}"
+    );
+    assert_eq!(cocog_train::TrainState::load(&ckpt).unwrap().iteration, 30);
+
     let mut resumed = options.clone();
     resumed["resume"] = json!(ckpt.display().to_string());
     let done = tmp.path().join("done");
