@@ -154,7 +154,7 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
             let out = summary.get("output").and_then(Value::as_str).unwrap_or("");
             print_result(g, &summary, Path::new(out))
         }
-        Command::Plugins => plugins::list(&registry, g.json),
+        Command::Plugins => plugins::list(&registry, g.json, g.verbose),
         Command::Demo(a) => demo::run(&registry, a, g, ctx),
         Command::Bench(a) => bench(a, g, ctx),
     }
@@ -188,6 +188,12 @@ fn build_registry(g: &Global, ctx: &dyn Context, listing: bool) -> Result<Regist
     let mut registry = Registry::new();
     builtins::register(&mut registry);
     registry.load_plugins(&plugin_dirs(&g.plugin_path));
+    for (path, why) in &registry.skipped {
+        ctx.debug(&format!(
+            "not a plugin, not opened: {}: {why}",
+            path.display()
+        ));
+    }
     // `cocog plugins` reports broken libraries itself, in its table.
     if !listing {
         for e in &registry.load_errors {

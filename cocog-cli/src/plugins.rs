@@ -5,7 +5,7 @@ use cocog_pipeline::plugin::ABI_VERSION;
 use cocog_pipeline::{Provider, Registry};
 use serde_json::{Value, json};
 
-pub fn list(registry: &Registry, as_json: bool) -> Result<()> {
+pub fn list(registry: &Registry, as_json: bool, verbose: bool) -> Result<()> {
     let mut rows = Vec::new();
     for (entry, active) in registry.entries() {
         let (provider, file, version) = match &entry.provider {
@@ -33,11 +33,32 @@ pub fn list(registry: &Registry, as_json: bool) -> Result<()> {
         }));
     }
     let errors: Vec<String> = registry.load_errors.iter().map(|e| e.to_string()).collect();
+    let skipped: Vec<Value> = registry
+        .skipped
+        .iter()
+        .map(|(path, why)| json!({ "file": path.display().to_string(), "why": why }))
+        .collect();
     if as_json {
-        let v = json!({ "abi_version": ABI_VERSION, "stages": rows, "errors": errors });
+        let v = json!({
+            "abi_version": ABI_VERSION,
+            "stages": rows,
+            "errors": errors,
+            "skipped": skipped,
+        });
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         print_table(&rows);
+        if verbose {
+            for (path, why) in &registry.skipped {
+                eprintln!("skipped {}: {why}", path.display());
+            }
+        } else if !skipped.is_empty() {
+            let n = skipped.len();
+            let what = if n == 1 { "library" } else { "libraries" };
+            eprintln!(
+                "skipped {n} {what} without the cocog plugin entry, unopened (-v lists them)"
+            );
+        }
         for e in &errors {
             eprintln!("error: {e}");
         }

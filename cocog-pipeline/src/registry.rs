@@ -57,8 +57,10 @@ pub enum RegistryError {
 pub struct Registry {
     entries: Vec<StageEntry>,
     overrides: BTreeMap<String, usize>,
-    /// Libraries on the plugin path that could not be loaded.
+    /// Plugins on the plugin path that could not be loaded.
     pub load_errors: Vec<PluginError>,
+    /// Libraries on the plugin path that are not plugins (never opened), with why.
+    pub skipped: Vec<(PathBuf, String)>,
 }
 
 impl Registry {
@@ -99,11 +101,12 @@ impl Registry {
 
     /// Loads every plugin under `dirs`; failures are kept in `load_errors`.
     pub fn load_plugins(&mut self, dirs: &[PathBuf]) {
-        let (plugins, errors) = discover(dirs);
-        for p in &plugins {
+        let found = discover(dirs);
+        for p in &found.plugins {
             self.add_plugin(p);
         }
-        self.load_errors.extend(errors);
+        self.load_errors.extend(found.errors);
+        self.skipped.extend(found.skipped);
     }
 
     /// Applies `--use STAGE=PLUGIN`, where PLUGIN is a loaded plugin's name or a path to

@@ -91,56 +91,100 @@ fn a_failing_stage_reports_its_message_and_the_plugin_file() {
     assert!(!work.path().join("out").exists());
 }
 
+/// Runs `cocog` with the constructor fixture's mark file in its environment.
+fn cocog_marked(args: &[&str], mark: &Path) -> std::process::Output {
+    std::process::Command::new(cocog_tests::cocog_bin())
+        .args(args)
+        .env("COCOG_TEST_CONSTRUCTOR_MARK", mark)
+        .env_remove("COCOG_PLUGIN_PATH")
+        .output()
+        .expect("run cocog")
+}
+
 #[test]
-fn files_that_are_not_plugins_are_named_with_the_cause() {
-    let dir = tempfile::tempdir().expect("tempdir");
+fn libraries_that_are_not_plugins_are_never_opened() {
+    let constructor = cdylib("cocog-test-constructor");
+    let plugin = cdylib("cocog-test-misbehaving");
+    let dir = plugin_dir(&[&constructor, &plugin]);
     let junk = dir
         .path()
         .join(format!("junk{}", std::env::consts::DLL_SUFFIX));
     std::fs::write(&junk, b"this is not a shared library").expect("write");
-    let out = cocog(&[
-        "plugins",
-        "--plugin-path",
-        dir.path().to_str().expect("utf-8"),
-    ]);
+    let work = tempfile::tempdir().expect("tempdir");
+    let mark = work.path().join("constructor-ran");
+    let dir_arg = dir.path().to_str().expect("utf-8");
+
+    let out = cocog_marked(&["plugins", "--plugin-path", dir_arg], &mark);
     let err = stderr(&out);
-    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    assert!(err.contains("skipped 2 libraries"), "{err}");
+    assert!(cocog_tests::stdout(&out).contains("explode"));
+    assert!(!mark.exists(), "discovery ran a non-plugin's constructor");
+
+    // -v names each with its reason.
+    let out = cocog_marked(&["plugins", "-v", "--plugin-path", dir_arg], &mark);
+    let err = stderr(&out);
     assert!(
-        err.contains("junk") && err.contains("cannot load as a library"),
+        err.contains("junk") && err.contains("not a library"),
+        "{err}"
+    );
+    assert!(
+        err.contains("libcocog_test_constructor") && err.contains("does not export"),
         "{err}"
     );
 
-    let missing = dir.path().join("no-such-dir");
-    let out = cocog(&["plugins", "--plugin-path", missing.to_str().expect("utf-8")]);
-    assert!(stderr(&out).contains("no-such-dir"), "{}", stderr(&out));
+    // Named explicitly it is refused, still unopened.
+    let lib_arg = constructor.to_str().expect("utf-8");
+    let out = cocog_marked(&["plugins", "--use", &format!("train={lib_arg}")], &mark);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("cocog_plugin_entry"), "{err}");
+    assert!(!mark.exists(), "--use ran a non-plugin's constructor");
+
+    // The control: loading the fixture does leave the mark, so the checks above can fail.
+    if cfg!(target_os = "linux") {
+        let loaded = std::process::Command::new("python3")
+            .args([
+                "-c",
+                "import ctypes, sys; ctypes.CDLL(sys.argv[1])",
+                lib_arg,
+            ])
+            .env("COCOG_TEST_CONSTRUCTOR_MARK", &mark)
+            .status();
+        match loaded {
+            Ok(status) if status.success() => assert!(mark.exists()),
+            _ => eprintln!("control skipped: python3 could not load the fixture"),
+        }
+    }
 }
 
 #[test]
-fn a_library_without_the_entry_symbol_is_refused() {
-    // Any real shared library that is not a cocog plugin will do.
-    let candidates = [
-        "/lib/x86_64-linux-gnu/libm.so.6",
-        "/usr/lib/x86_64-linux-gnu/libm.so.6",
-        "/lib/aarch64-linux-gnu/libm.so.6",
-        "/usr/lib/aarch64-linux-gnu/libm.so.6",
-    ];
-    let Some(libm) = candidates.iter().map(Path::new).find(|p| p.exists()) else {
-        eprintln!("skipped: no libm.so.6 found to stand in for a non-plugin library");
-        return;
-    };
-    let dir = tempfile::tempdir().expect("tempdir");
-    std::fs::copy(libm, dir.path().join("libm.so")).expect("copy");
+fn cargo_deps_copies_count_once_and_missing_dirs_are_named() {
+    let plugin = cdylib("cocog-test-misbehaving");
+    let dir = plugin_dir(&[&plugin]);
+    let deps = dir.path().join("deps");
+    std::fs::create_dir(&deps).expect("mkdir");
+    std::fs::copy(&plugin, deps.join(plugin.file_name().expect("name"))).expect("copy");
     let out = cocog(&[
         "plugins",
         "--plugin-path",
         dir.path().to_str().expect("utf-8"),
     ]);
-    let err = stderr(&out);
-    assert_eq!(out.status.code(), Some(1), "{err}");
-    assert!(
-        err.contains("libm.so") && err.contains("cocog_plugin_entry"),
-        "{err}"
+    let table = cocog_tests::stdout(&out);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    assert_eq!(
+        table.lines().filter(|l| l.starts_with("explode ")).count(),
+        1,
+        "{table}"
     );
+    // `deps/` on its own still finds it.
+    let out = cocog(&["plugins", "--plugin-path", deps.to_str().expect("utf-8")]);
+    assert!(cocog_tests::stdout(&out).contains("explode"));
+
+    let missing = dir.path().join("no-such-dir");
+    let out = cocog(&["plugins", "--plugin-path", missing.to_str().expect("utf-8")]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr(&out).contains("no-such-dir"), "{}", stderr(&out));
 }
 
 #[test]
@@ -202,4 +246,35 @@ fn a_plugin_replaces_a_built_in_only_when_asked() {
         "{}",
         stderr(&out)
     );
+}
+
+#[cfg(target_os = "linux")]
+#[test]
+fn a_plugin_the_loader_refuses_is_reported_with_the_loader_message() {
+    // The plugin built for another CPU: its export table still reads, dlopen refuses it.
+    let plugin = cdylib("cocog-test-misbehaving");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let copy = dir.path().join(plugin.file_name().expect("name"));
+    let mut bytes = std::fs::read(&plugin).expect("read plugin");
+    let other_machine: u16 = if cfg!(target_arch = "aarch64") {
+        62
+    } else {
+        183
+    };
+    bytes[18..20].copy_from_slice(&other_machine.to_le_bytes());
+    std::fs::write(&copy, bytes).expect("write");
+    let out = cocog(&[
+        "plugins",
+        "--plugin-path",
+        dir.path().to_str().expect("utf-8"),
+    ]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    let line = err
+        .lines()
+        .find(|l| l.contains("dlopen failed"))
+        .unwrap_or_else(|| panic!("no loader error in: {err}"));
+    // The loader's own words follow libloading's "dlopen failed: ".
+    let (_, reason) = line.split_once("dlopen failed: ").expect("a reason");
+    assert!(reason.contains("libcocog_test_misbehaving"), "{line}");
 }

@@ -60,11 +60,18 @@ impl LoadedPlugin {
     /// Loads `path`, checks its ABI version and reads its descriptor.
     pub fn load(path: &Path) -> Result<Arc<Self>, PluginError> {
         let path = path.to_path_buf();
+        // Read before opening: dlopen runs the library's constructors, and a library that
+        // is not a cocog plugin gets no chance to run anything.
+        match super::exports::exports_entry(&path) {
+            Ok(true) => {}
+            Ok(false) => return Err(PluginError::MissingSymbol { path }),
+            Err(message) => return Err(PluginError::Load { path, message }),
+        }
         // SAFETY: loading a library runs its initialisers; that is the trust a user gives
-        // a plugin by putting it on the plugin path.
+        // a plugin by putting it on the plugin path, and it exports our entry point.
         let lib = unsafe { libloading::Library::new(&path) }.map_err(|e| PluginError::Load {
             path: path.clone(),
-            message: e.to_string(),
+            message: loader_message(&e),
         })?;
         // SAFETY: the symbol's type is fixed by the ABI; a library exporting the name
         // with another type violates the contract.
@@ -239,4 +246,12 @@ unsafe extern "C" fn host_cancelled(user: *const c_void) -> u8 {
     // SAFETY: as in `host_log`.
     let ctx = unsafe { user_ctx(user) };
     catch_unwind(AssertUnwindSafe(|| u8::from(ctx.cancelled()))).unwrap_or(1)
+}
+
+/// libloading's own text is "dlopen failed"; the loader's reason is its source.
+fn loader_message(e: &libloading::Error) -> String {
+    match std::error::Error::source(e) {
+        Some(cause) => format!("{e}: {cause}"),
+        None => e.to_string(),
+    }
 }

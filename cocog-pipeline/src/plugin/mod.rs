@@ -6,9 +6,10 @@
 
 pub mod abi;
 pub mod discover;
+mod exports;
 pub mod guest;
 pub mod host;
 
 pub use abi::{ABI_VERSION, ENTRY_SYMBOL};
-pub use discover::{discover, plugin_dirs};
+pub use discover::{Discovery, discover, plugin_dirs};
 pub use host::{LoadedPlugin, PluginError, PluginStage};
