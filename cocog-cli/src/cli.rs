@@ -115,6 +115,10 @@ pub struct IngestArgs {
     /// COLMAP: which sparse/N model to use. Default: the one with most images.
     #[arg(long)]
     pub model: Option<u32>,
+    /// Accept image paths that lead outside the dataset folder (`../`, absolute paths).
+    /// Refused by default: a dataset file should not point cocog at other files.
+    #[arg(long = "allow-outside")]
+    pub allow_outside: bool,
 }
 
 #[derive(Args)]
@@ -137,7 +141,7 @@ pub struct DensifyArgs {
     #[arg(long)]
     pub seed: Option<u64>,
     /// Drop candidates with no input point within this distance (scene units).
-    #[arg(long = "max-distance")]
+    #[arg(long = "max-distance", value_parser = finite)]
     pub max_distance: Option<f64>,
 }
 
@@ -146,10 +150,10 @@ pub struct PruneArgs {
     #[command(flatten)]
     pub io: SceneToScene,
     /// Depth-weighted opacity below which a Gaussian is removed.
-    #[arg(long)]
+    #[arg(long, value_parser = finite)]
     pub threshold: Option<f64>,
     /// Depth range factor of the weighting (Deblurring-3DGS).
-    #[arg(long)]
+    #[arg(long, value_parser = finite)]
     pub range: Option<f64>,
 }
 
@@ -302,10 +306,10 @@ pub struct RenderArgs {
     pub background: Option<String>,
     /// Refocus: plane in focus, in scene units. Needs a CoCoGaussian model, which
     /// `train --method cocog` does not produce yet, so this is refused for now.
-    #[arg(long = "focus-distance")]
+    #[arg(long = "focus-distance", value_parser = finite)]
     pub focus_distance: Option<f64>,
     /// Refocus: aperture scale K of the CoC model (refused for now, like --focus-distance).
-    #[arg(long)]
+    #[arg(long, value_parser = finite)]
     pub aperture: Option<f64>,
     /// Also write depth/<view>.exr: expected depth along the optical axis divided by the
     /// pixel's alpha, 0 where nothing was seen.
@@ -387,6 +391,11 @@ pub struct RunArgs {
     /// The pipeline file (TOML): [pipeline] input, output, stages, plus one table of
     /// options per stage.
     pub pipeline: PathBuf,
+    /// Continue an interrupted or changed pipeline: stages whose output exists from the same
+    /// input with the same options are kept, the first changed one and all after it run
+    /// again, and an interrupted training stage continues from its checkpoint.
+    #[arg(long)]
+    pub resume: bool,
 }
 
 #[derive(Args)]

@@ -4,8 +4,9 @@ use std::fmt;
 use std::path::Path;
 
 use anyhow::{Context as _, Result};
+use cocog_pipeline::pipeline::{RunMode, run_pipeline};
 use cocog_pipeline::plugin::plugin_dirs;
-use cocog_pipeline::runner::{run_pipeline, run_stage};
+use cocog_pipeline::runner::run_stage;
 use cocog_pipeline::{Context, Registry, StageEntry};
 use serde_json::{Map, Value};
 
@@ -50,7 +51,10 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
                 DatasetFormat::Llff => "ingest-llff",
                 DatasetFormat::Nerf => "ingest-nerf",
             };
-            let o = options! { "downscale" => a.downscale, "hold" => a.hold, "model" => a.model };
+            let o = options! {
+                "downscale" => a.downscale, "hold" => a.hold, "model" => a.model,
+                "allow-outside" => a.allow_outside.then_some(true),
+            };
             run(name, &a.dataset, &a.output, o)
         }
         Command::Densify(a) => {
@@ -141,7 +145,11 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
             run(&a.name, &a.input, &a.output, o)
         }
         Command::Run(a) => {
-            let summary = match run_pipeline(&registry, &a.pipeline, g.force, ctx) {
+            let mode = RunMode {
+                force: g.force,
+                resume: a.resume,
+            };
+            let summary = match run_pipeline(&registry, &a.pipeline, mode, ctx) {
                 Ok(s) => s,
                 // Mistakes in the file already name it.
                 Err(e @ cocog_pipeline::runner::RunError::Pipeline { .. }) => return Err(e.into()),

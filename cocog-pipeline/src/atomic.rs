@@ -21,6 +21,42 @@ pub fn sibling_temp(target: &Path) -> PathBuf {
     parent.join(format!(".{name}.cocog-tmp-{}-{n}", std::process::id()))
 }
 
+/// Removes hidden siblings of `target` left by cocog processes that no longer run (a run
+/// killed with SIGKILL cannot clean up after itself). Only on Linux, where `/proc` tells
+/// whether a process lives; elsewhere they stay, which is safe.
+pub fn remove_stale_temps(target: &Path) {
+    let (Some(name), parent) = (target.file_name(), target.parent()) else {
+        return;
+    };
+    let parent = parent
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or_else(|| Path::new("."));
+    let prefix = format!(".{}.cocog-tmp-", name.to_string_lossy());
+    let Ok(entries) = fs::read_dir(parent) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let file_name = entry.file_name();
+        let Some(pid) = file_name
+            .to_str()
+            .and_then(|n| n.strip_prefix(&prefix))
+            .and_then(|rest| rest.split('-').next())
+            .and_then(|pid| pid.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        if pid != std::process::id() && process_is_gone(pid) {
+            let _ = remove_any(&entry.path());
+        }
+    }
+}
+
+fn process_is_gone(pid: u32) -> bool {
+    cfg!(target_os = "linux")
+        && Path::new("/proc/self").exists()
+        && !Path::new(&format!("/proc/{pid}")).exists()
+}
+
 /// Writes `bytes` to `path` atomically.
 pub fn write(path: &Path, bytes: &[u8]) -> io::Result<()> {
     write_with(path, |f| f.write_all(bytes))
@@ -118,6 +154,26 @@ mod tests {
         assert!(r.is_err());
         let left: Vec<_> = fs::read_dir(dir.path()).expect("read_dir").collect();
         assert!(left.is_empty(), "left behind: {left:?}");
+    }
+
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn temps_of_dead_processes_are_removed_and_live_ones_kept() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let target = dir.path().join("out");
+        // A pid that cannot exist (above the kernel's pid_max limit of 2^22).
+        let dead = dir.path().join(".out.cocog-tmp-4194305-0");
+        let live = dir
+            .path()
+            .join(format!(".out.cocog-tmp-{}-0", std::process::id()));
+        let other = dir.path().join(".other.cocog-tmp-4194305-0");
+        for d in [&dead, &live, &other] {
+            fs::create_dir(d).expect("mkdir");
+            fs::write(d.join("x"), b"1").expect("write");
+        }
+        remove_stale_temps(&target);
+        assert!(!dead.exists());
+        assert!(live.exists() && other.exists());
     }
 
     #[test]

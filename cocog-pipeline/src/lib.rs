@@ -4,12 +4,13 @@
 //! - [`stage`]: the [`Stage`] trait every stage implements, built in or loaded from a plugin.
 //! - [`plugin`]: the C ABI for dynamic plugins, the host-side loader and the guest-side export macro.
 //! - [`registry`]: which stage answers to which name, and who provides it.
-//! - [`runner`]: runs one stage into a staging path and renames it into place, or a whole
-//!   `pipeline.toml` chain.
+//! - [`runner`]: runs one stage into a staging path and renames it into place.
+//! - [`pipeline`]: runs a `pipeline.toml` chain, checkpointed and resumable.
 
 pub mod atomic;
 pub mod context;
 pub mod options;
+pub mod pipeline;
 pub mod plugin;
 pub mod registry;
 pub mod replace;

@@ -52,6 +52,12 @@ pub struct OptionSpec {
     pub default: Option<Value>,
     #[serde(default)]
     pub help: String,
+    /// Smallest accepted value of a number (inclusive).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub min: Option<f64>,
+    /// Largest accepted value of a number (inclusive).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max: Option<f64>,
 }
 
 impl OptionSpec {
@@ -61,7 +67,35 @@ impl OptionSpec {
             kind,
             default,
             help: help.to_owned(),
+            min: None,
+            max: None,
         }
+    }
+
+    /// Numbers below `min` are refused before the stage runs.
+    pub fn at_least(mut self, min: f64) -> Self {
+        self.min = Some(min);
+        self
+    }
+
+    /// Numbers outside `min..=max` are refused before the stage runs.
+    pub fn between(mut self, min: f64, max: f64) -> Self {
+        self.min = Some(min);
+        self.max = Some(max);
+        self
+    }
+
+    /// Why `v` (already of the right kind) is out of range, if it is.
+    fn out_of_range(&self, v: &Value) -> Option<String> {
+        let x = v.as_f64()?;
+        let low = self.min.is_some_and(|m| x < m);
+        let high = self.max.is_some_and(|m| x > m);
+        (low || high).then(|| match (self.min, self.max) {
+            (Some(a), Some(b)) => format!("expected a number from {a} to {b}"),
+            (Some(a), None) => format!("expected a number of at least {a}"),
+            (None, Some(b)) => format!("expected a number of at most {b}"),
+            (None, None) => unreachable!("a range check without bounds"),
+        })
     }
 
     pub fn int(name: &str, default: i64, help: &str) -> Self {
@@ -121,6 +155,12 @@ impl Options {
         for spec in specs {
             match given.get(&spec.name).filter(|v| !v.is_null()) {
                 Some(v) if spec.kind.accepts(v) => {
+                    if let Some(why) = spec.out_of_range(v) {
+                        return Err(StageError::Options(format!(
+                            "stage '{stage}' option '{}': {why}, got {v}",
+                            spec.name
+                        )));
+                    }
                     out.insert(spec.name.clone(), v.clone());
                 }
                 Some(v) => {
@@ -208,6 +248,27 @@ mod tests {
         assert!(e.unwrap_err().to_string().contains("expected int"));
         let e = Options::validate("s", &specs(), &map(json!({})));
         assert!(e.unwrap_err().to_string().contains("needs option 'gt'"));
+    }
+
+    #[test]
+    fn numbers_outside_their_range_are_refused() {
+        let s = vec![
+            OptionSpec::float("threshold", 0.5, "").between(0.0, 1.0),
+            OptionSpec::int("points", 10, "").at_least(1.0),
+        ];
+        let ok = Options::validate("s", &s, &map(json!({"threshold": 1, "points": 1})));
+        assert!(ok.is_ok());
+        let e = Options::validate("s", &s, &map(json!({"threshold": 1.5}))).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("'threshold': expected a number from 0 to 1, got 1.5"),
+            "{e}"
+        );
+        let e = Options::validate("s", &s, &map(json!({"points": 0}))).unwrap_err();
+        assert!(e.to_string().contains("at least 1, got 0"), "{e}");
+        // Defaults are the stage's own and are not re-checked.
+        let wide = vec![OptionSpec::int("n", 0, "").at_least(1.0)];
+        assert!(Options::validate("s", &wide, &map(json!({}))).is_ok());
     }
 
     #[test]

@@ -150,6 +150,26 @@ pub fn write_tiny_scene(dir: &Path, n: usize, centre: [f64; 3], radius: f64) {
     cocog_formats::ply::write_points(&dir.join("points.ply"), &cloud).expect("write points.ply");
 }
 
+/// A scene with one trained Gaussian, so `export` has something to write.
+pub fn scene_with_gaussians(dir: &Path) {
+    write_tiny_scene(dir, 4, [0.0; 3], 1.0);
+    let splats = cocog_formats::Splats {
+        means: vec![0.0; 3],
+        log_scales: vec![-2.0; 3],
+        rotations: vec![1.0, 0.0, 0.0, 0.0],
+        opacities: vec![0.0],
+        sh_dc: vec![0.5; 3],
+        sh_rest: Vec::new(),
+        sh_degree: 0,
+    };
+    cocog_formats::ply::write_splats(&dir.join("gaussians.ply"), &splats, None).unwrap();
+    let manifest = dir.join("scene.json");
+    let mut scene: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&manifest).unwrap()).unwrap();
+    scene["gaussians"] = "gaussians.ply".into();
+    std::fs::write(&manifest, scene.to_string()).unwrap();
+}
+
 pub fn path_str(p: &Path) -> &str {
     p.to_str().expect("test paths are UTF-8")
 }

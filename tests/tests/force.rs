@@ -4,7 +4,9 @@
 use std::path::Path;
 use std::process::Command;
 
-use cocog_tests::{cdylib, cocog, cocog_bin, listing, path_str, stderr, write_tiny_scene};
+use cocog_tests::{
+    cdylib, cocog, cocog_bin, listing, path_str, scene_with_gaussians, stderr, write_tiny_scene,
+};
 
 fn recenter_args<'a>(input: &'a Path, output: &'a str, lib: &'a Path) -> Vec<&'a str> {
     vec![
@@ -68,26 +70,6 @@ fn force_refuses_what_cocog_did_not_write_and_replaces_what_it_did() {
     let mut names = listing(work.path());
     names.sort();
     assert_eq!(names, vec!["made", "mine", "scene"]);
-}
-
-/// A scene with one trained Gaussian, so `export` has something to write.
-fn scene_with_gaussians(dir: &Path) {
-    write_tiny_scene(dir, 4, [0.0; 3], 1.0);
-    let splats = cocog_formats::Splats {
-        means: vec![0.0; 3],
-        log_scales: vec![-2.0; 3],
-        rotations: vec![1.0, 0.0, 0.0, 0.0],
-        opacities: vec![0.0],
-        sh_dc: vec![0.5; 3],
-        sh_rest: Vec::new(),
-        sh_degree: 0,
-    };
-    cocog_formats::ply::write_splats(&dir.join("gaussians.ply"), &splats, None).unwrap();
-    let manifest = dir.join("scene.json");
-    let mut scene: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&manifest).unwrap()).unwrap();
-    scene["gaussians"] = "gaussians.ply".into();
-    std::fs::write(&manifest, scene.to_string()).unwrap();
 }
 
 #[test]

@@ -114,9 +114,88 @@ fn pipeline_mistakes_fail_before_any_stage_runs() {
         stderr(&out)
     );
 
+    // An option typo, or a value JSON cannot carry, in a later stage's table.
+    std::fs::write(
+        &pipeline,
+        "[pipeline]\ninput = \"dataset\"\noutput = \"out\"\nstages = [\"ingest-colmap\", \"densify\", \"export\"]\n[export]\nformt = \"glb\"\n",
+    )
+    .expect("write");
+    let out = cocog(&["run", path_str(&pipeline)]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        stderr(&out).contains("no option 'formt'"),
+        "{}",
+        stderr(&out)
+    );
+    std::fs::write(
+        &pipeline,
+        "[pipeline]\ninput = \"dataset\"\noutput = \"out\"\nstages = [\"ingest-colmap\", \"densify\"]\n[densify]\nmax-distance = nan\n",
+    )
+    .expect("write");
+    let out = cocog(&["run", path_str(&pipeline)]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        stderr(&out).contains("[densify] option 'max-distance': NaN is not a finite number"),
+        "{}",
+        stderr(&out)
+    );
+
     std::fs::write(&pipeline, "[pipeline]\ninput = 3\n").expect("write");
     let out = cocog(&["run", path_str(&pipeline)]);
     assert_eq!(out.status.code(), Some(1));
     assert!(stderr(&out).contains("p.toml"), "{}", stderr(&out));
     assert_eq!(listing(work.path()), vec!["dataset", "p.toml"]);
+}
+
+#[test]
+fn resume_keeps_finished_stages_and_reruns_from_a_changed_option() {
+    let work = tempfile::tempdir().expect("tempdir");
+    write_defocus_dataset(&work.path().join("dataset"), &SynthConfig::tiny(3)).expect("synth");
+    let pipeline = work.path().join("pipeline.toml");
+    let write = |radius: f64| {
+        std::fs::write(
+            &pipeline,
+            format!(
+                "[pipeline]\ninput = \"dataset\"\noutput = \"final\"\n\
+                 stages = [\"ingest-colmap\", \"recenter\"]\n\n[recenter]\nradius = {radius:?}\n"
+            ),
+        )
+        .expect("write pipeline");
+    };
+    let lib = cdylib("cocog-plugin-recenter");
+    let run = |extra: &[&str]| {
+        let mut args = vec!["run", path_str(&pipeline), "--plugin-path", path_str(&lib)];
+        args.extend(extra);
+        cocog(&args)
+    };
+    write(1.5);
+    let out = run(&[]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let ingested = work.path().join("final.stages/01-ingest-colmap/scene.json");
+    let first = std::fs::metadata(&ingested).unwrap().modified().unwrap();
+
+    // A rerun without --resume or --force refuses rather than redoing anything.
+    let out = run(&[]);
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    assert!(stderr(&out).contains("already exists"), "{}", stderr(&out));
+
+    // Nothing changed: everything is kept.
+    let out = run(&["--resume"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(stderr(&out).matches("kept").count(), 2, "{}", stderr(&out));
+
+    // The last stage's option changed: ingest is kept, recenter runs again.
+    write(2.5);
+    let out = run(&["--resume"]);
+    let err = stderr(&out);
+    assert!(out.status.success(), "{err}");
+    assert!(err.contains("[1/2] ingest-colmap: kept"), "{err}");
+    assert!(err.contains("[2/2] recenter ->"), "{err}");
+    assert_eq!(
+        std::fs::metadata(&ingested).unwrap().modified().unwrap(),
+        first
+    );
+    let scene = read_scene(&work.path().join("final"));
+    let last = scene["history"].as_array().unwrap().last().unwrap().clone();
+    assert_eq!(last["options"]["radius"], 2.5);
 }

@@ -14,6 +14,9 @@ use cocog_pipeline::{
 };
 use serde_json::{Value, json};
 
+/// The most candidate points `densify` draws (see the option's note).
+pub const MAX_POINTS: usize = 100_000_000;
+
 pub use extra::{Extra, SplitMix64, extra_points, robust_box};
 
 pub struct Densify;
@@ -26,7 +29,11 @@ impl Stage for Densify {
             output: OutputKind::Dir,
             description: "Add extra points in the point cloud's bounding box, coloured from their 4 nearest points".to_owned(),
             options: vec![
-                OptionSpec::int("points", 200_000, "candidate points to draw (those far from every SfM point are dropped)"),
+                // 15 bytes a point plus a k-d tree query each: 100 M is ~1.5 GB and minutes of
+                // work, far past any scene 3DGS trains on, and refusing beyond it turns a
+                // typo (an extra few zeros) into a message instead of an allocation abort.
+                OptionSpec::int("points", 200_000, "candidate points to draw (those far from every SfM point are dropped)")
+                    .between(0.0, MAX_POINTS as f64),
                 OptionSpec::int("seed", 0, "random seed"),
                 OptionSpec::float("max-distance", 2.0, "drop a candidate with no SfM point closer than this (scene units)"),
             ],
@@ -35,9 +42,14 @@ impl Stage for Densify {
 
     fn run(&self, req: &StageRequest, ctx: &dyn Context) -> Result<Value, StageError> {
         let count = req.options.get_i64("points").unwrap_or(200_000);
-        let count = usize::try_from(count).map_err(|_| {
-            StageError::Options(format!("densify: option 'points' must be ≥ 0, got {count}"))
-        })?;
+        let count = usize::try_from(count)
+            .ok()
+            .filter(|&c| c <= MAX_POINTS)
+            .ok_or_else(|| {
+                StageError::Options(format!(
+                    "densify: option 'points' must be from 0 to {MAX_POINTS}, got {count}"
+                ))
+            })?;
         let seed = req.options.get_i64("seed").unwrap_or(0) as u64;
         let max_distance = req.options.get_f64("max-distance").unwrap_or(2.0);
         if !(max_distance.is_finite() && max_distance > 0.0) {

@@ -155,8 +155,8 @@ fn refuse_foreign_checkpoint(plan: &Plan) -> Result<(), StageError> {
         return Ok(());
     }
     Err(StageError::Options(format!(
-        "{} holds the checkpoint of an interrupted run; continue it with --resume {}, or \
-         remove it to start afresh",
+        "{} holds the checkpoint of an interrupted run; continue it with --resume {} (in a \
+         pipeline: cocog run --resume), or remove it to start afresh",
         dir.display(),
         dir.display()
     )))

@@ -1,0 +1,268 @@
+//! `cocog run`: a chain of stages from a `pipeline.toml`, checkpointed and resumable.
+
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+use serde_json::{Map, Value, json};
+
+use crate::context::Context;
+use crate::options::Options;
+use crate::registry::{Registry, StageEntry};
+use crate::runner::{RunError, run_stage};
+use crate::scene::Scene;
+use crate::stage::{OutputKind, StageKind};
+
+/// Options the pipeline sets itself; a resumed stage is "the same" whatever their values.
+const RUNNER_OPTIONS: [&str; 2] = ["checkpoint_dir", "resume"];
+
+/// A `pipeline.toml`: a `[pipeline]` table and one optional table of options per stage.
+///
+/// ```toml
+/// [pipeline]
+/// input = "data/dev-table"      # relative paths resolve against this file's directory
+/// output = "runs/dev-table"     # the last stage's output
+/// stages = ["ingest-llff", "densify"]
+///
+/// [densify]
+/// points = 200000
+/// ```
+/// Intermediate results go to `<output>.stages/NN-<stage>/`, so each can be inspected
+/// or used to rerun part of the chain; a training stage keeps its checkpoint in
+/// `<output>.stages/NN-<stage>.checkpoint/` until it succeeds.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PipelineHeader {
+    input: PathBuf,
+    output: PathBuf,
+    stages: Vec<String>,
+}
+
+/// How `cocog run` treats earlier results.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RunMode {
+    /// Replace outputs cocog wrote earlier.
+    pub force: bool,
+    /// Keep stages whose output exists with the same options and input, and continue an
+    /// interrupted training stage from its checkpoint.
+    pub resume: bool,
+}
+
+/// One stage of the chain, with everything checked before anything runs.
+struct Step<'a> {
+    name: &'a str,
+    entry: &'a StageEntry,
+    options: Map<String, Value>,
+    output: PathBuf,
+    checkpoint: Option<PathBuf>,
+}
+
+pub fn run_pipeline(
+    registry: &Registry,
+    file: &Path,
+    mode: RunMode,
+    ctx: &dyn Context,
+) -> Result<Value, RunError> {
+    let bad = |message: String| RunError::Pipeline {
+        path: file.to_path_buf(),
+        message,
+    };
+    let text = std::fs::read_to_string(file).map_err(|e| bad(e.to_string()))?;
+    let mut doc: toml::Table = toml::from_str(&text).map_err(|e| bad(e.to_string()))?;
+    let header = doc
+        .remove("pipeline")
+        .ok_or_else(|| bad("missing the [pipeline] table".to_owned()))?;
+    let header: PipelineHeader = header
+        .try_into()
+        .map_err(|e| bad(format!("[pipeline]: {e}")))?;
+    if header.stages.is_empty() {
+        return Err(bad("[pipeline].stages is empty".to_owned()));
+    }
+    for key in doc.keys() {
+        if !header.stages.contains(key) {
+            return Err(bad(format!(
+                "table [{key}] is not a stage listed in [pipeline].stages"
+            )));
+        }
+    }
+    let base = file.parent().unwrap_or_else(|| Path::new("."));
+    let output = base.join(&header.output);
+    let work = PathBuf::from(format!("{}.stages", output.display()));
+    // Resolve and validate every stage before running any, so a typo in the last table
+    // fails in a second, not after an hour of training.
+    let mut steps = Vec::new();
+    for (i, name) in header.stages.iter().enumerate() {
+        let entry = registry.resolve(name)?;
+        let last = i + 1 == header.stages.len();
+        let kind = entry.info.kind;
+        if !last
+            && !matches!(
+                kind,
+                StageKind::Ingest | StageKind::Transform | StageKind::Train
+            )
+        {
+            return Err(bad(format!(
+                "stage '{name}' ({kind:?}) does not write a scene, so no stage can follow it; \
+                 put it last, or run it separately on an intermediate scene in {}",
+                work.display()
+            )));
+        }
+        let mut options = match doc.get(name.as_str()) {
+            Some(toml::Value::Table(t)) => {
+                table_to_json(t).map_err(|e| bad(format!("[{name}] {e}")))?
+            }
+            Some(_) => return Err(bad(format!("[{name}] must be a table of options"))),
+            None => Map::new(),
+        };
+        Options::validate(name, &entry.info.options, &options).map_err(|source| {
+            RunError::Stage {
+                stage: name.clone(),
+                source,
+            }
+        })?;
+        let step_out = if last {
+            output.clone()
+        } else {
+            work.join(format!("{:02}-{name}", i + 1))
+        };
+        let checkpoint = checkpoint_dir(entry, &step_out, &mut options);
+        steps.push(Step {
+            name,
+            entry,
+            options,
+            output: step_out,
+            checkpoint,
+        });
+    }
+    let mut input = base.join(&header.input);
+    let mut done = Vec::new();
+    // Once a stage runs again, every later stage must too: its input changed.
+    let mut rerun = !mode.resume;
+    let count = steps.len();
+    for (i, mut step) in steps.into_iter().enumerate() {
+        let progress = format!("[{}/{count}] {}", i + 1, step.name);
+        if !rerun && finished_before(&step, &input) {
+            ctx.info(&format!(
+                "{progress}: kept {} (same options and input)",
+                step.output.display()
+            ));
+            done.push(json!({ "stage": step.name, "output": step.output, "kept": true }));
+            input = step.output;
+            continue;
+        }
+        rerun = true;
+        if let Some(dir) = step
+            .checkpoint
+            .as_ref()
+            .filter(|d| mode.resume && d.exists())
+        {
+            ctx.info(&format!("{progress}: resuming from {}", dir.display()));
+            step.options
+                .insert("resume".into(), Value::String(dir.display().to_string()));
+        }
+        ctx.info(&format!("{progress} -> {}", step.output.display()));
+        // Under --resume an existing output is an earlier attempt's: cocog's to replace.
+        let force = mode.force || mode.resume;
+        let summary = run_stage(step.entry, &input, &step.output, &step.options, force, ctx)?;
+        done.push(json!({ "stage": step.name, "output": step.output, "summary": summary }));
+        input = step.output;
+    }
+    Ok(json!({ "output": output, "stages": done }))
+}
+
+/// Where a stage that can checkpoint (it has a `checkpoint_dir` option) keeps it, unless
+/// the file says otherwise; the option is filled in.
+fn checkpoint_dir(
+    entry: &StageEntry,
+    output: &Path,
+    options: &mut Map<String, Value>,
+) -> Option<PathBuf> {
+    if !entry
+        .info
+        .options
+        .iter()
+        .any(|o| o.name == "checkpoint_dir")
+    {
+        return None;
+    }
+    let dir = match options.get("checkpoint_dir").and_then(Value::as_str) {
+        Some(given) => PathBuf::from(given),
+        None => {
+            let dir = PathBuf::from(format!("{}.checkpoint", output.display()));
+            options.insert(
+                "checkpoint_dir".into(),
+                Value::String(dir.display().to_string()),
+            );
+            dir
+        }
+    };
+    Some(dir)
+}
+
+/// Did an earlier run finish this stage from this input with these options? Only scene
+/// outputs record that (in their history); files are always made again.
+fn finished_before(step: &Step, input: &Path) -> bool {
+    if step.entry.info.output != OutputKind::Dir {
+        return false;
+    }
+    if step.checkpoint.as_ref().is_some_and(|c| c.exists()) {
+        return false;
+    }
+    let Ok(scene) = Scene::load(&step.output) else {
+        return false;
+    };
+    let Some(last) = scene.history.last() else {
+        return false;
+    };
+    let Ok(wanted) = Options::validate(step.name, &step.entry.info.options, &step.options) else {
+        return false;
+    };
+    last.stage == step.entry.info.name
+        && canonical(Path::new(&last.input)) == canonical(input)
+        && same_options(
+            &last.options,
+            &serde_json::to_value(wanted).unwrap_or(Value::Null),
+        )
+}
+
+fn same_options(recorded: &Value, wanted: &Value) -> bool {
+    let strip = |v: &Value| -> Map<String, Value> {
+        let mut m = v.as_object().cloned().unwrap_or_default();
+        for k in RUNNER_OPTIONS {
+            m.remove(k);
+        }
+        m
+    };
+    strip(recorded) == strip(wanted)
+}
+
+/// TOML to JSON for stage options; NaN and infinities are refused here because JSON (the
+/// plugin boundary) cannot carry them and would silently turn them into "unset".
+fn table_to_json(t: &toml::Table) -> Result<Map<String, Value>, String> {
+    t.iter()
+        .map(|(k, v)| {
+            Ok((
+                k.clone(),
+                value_to_json(v).map_err(|e| format!("option '{k}': {e}"))?,
+            ))
+        })
+        .collect()
+}
+
+fn value_to_json(v: &toml::Value) -> Result<Value, String> {
+    Ok(match v {
+        toml::Value::String(s) => Value::String(s.clone()),
+        toml::Value::Integer(i) => Value::from(*i),
+        toml::Value::Float(f) if f.is_finite() => Value::from(*f),
+        toml::Value::Float(f) => return Err(format!("{f} is not a finite number")),
+        toml::Value::Boolean(b) => Value::Bool(*b),
+        toml::Value::Datetime(d) => Value::String(d.to_string()),
+        toml::Value::Array(a) => {
+            Value::Array(a.iter().map(value_to_json).collect::<Result<_, _>>()?)
+        }
+        toml::Value::Table(t) => Value::Object(table_to_json(t)?),
+    })
+}
+
+fn canonical(p: &Path) -> PathBuf {
+    p.canonicalize().unwrap_or_else(|_| p.to_path_buf())
+}
