@@ -27,8 +27,8 @@ const RUNNER_OPTIONS: [&str; 2] = ["checkpoint_dir", "resume"];
 /// points = 200000
 /// ```
 /// Intermediate results go to `<output>.stages/NN-<stage>/`, so each can be inspected
-/// or used to rerun part of the chain; a training stage keeps its checkpoint in
-/// `<output>.stages/NN-<stage>.checkpoint/` until it succeeds.
+/// or used to rerun part of the chain; a training stage keeps its checkpoint beside its own
+/// output (`<its output>.checkpoint/`) until it succeeds.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct PipelineHeader {

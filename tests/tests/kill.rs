@@ -1,0 +1,189 @@
+//! SIGKILL in the middle of training — of `cocog train` and of a `cocog run` pipeline —
+//! then resume: at most one checkpoint interval is lost, nothing stale is left beside the
+//! output, and the result matches an uninterrupted run.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use cocog_synth::{SynthConfig, write_defocus_dataset};
+use cocog_tests::{cocog, cocog_bin, listing, path_str, stderr, stdout};
+use serde_json::Value;
+
+const ITERATIONS: &str = "160";
+const EVERY: u64 = 20;
+
+fn ingested(root: &Path) -> PathBuf {
+    let data = root.join("data");
+    write_defocus_dataset(&data, &SynthConfig::tiny(4)).expect("synth");
+    let scene = root.join("scene");
+    let out = cocog(&["ingest", "llff", path_str(&data), "-o", path_str(&scene)]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    scene
+}
+
+fn spawn(args: &[&str]) -> Child {
+    Command::new(cocog_bin())
+        .args(args)
+        .env_remove("COCOG_PLUGIN_PATH")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("spawn cocog")
+}
+
+/// Waits until `ckpt` holds a checkpoint past the first, then SIGKILLs the process.
+fn kill_after_checkpoints(mut child: Child, ckpt: &Path) {
+    let state = ckpt.join("state.safetensors");
+    let started = Instant::now();
+    let mut first = None;
+    loop {
+        if let Some(status) = child.try_wait().expect("try_wait") {
+            panic!("training ended ({status}) before it could be killed");
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(600),
+            "no checkpoint appeared"
+        );
+        let modified = std::fs::metadata(&state).and_then(|m| m.modified()).ok();
+        match (first, modified) {
+            (None, Some(t)) => first = Some(t),
+            (Some(a), Some(b)) if b != a => break,
+            _ => {}
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // Some way past that checkpoint, as a real kill would be.
+    std::thread::sleep(Duration::from_millis(300));
+    child.kill().expect("SIGKILL");
+    child.wait().expect("reap");
+}
+
+/// The furthest iteration the killed run logged, from its hidden staging folder.
+fn last_logged_iteration(parent: &Path, output_name: &str) -> u64 {
+    let prefix = format!(".{output_name}.cocog-tmp-");
+    let staging = listing(parent)
+        .into_iter()
+        .find(|n| n.starts_with(&prefix))
+        .unwrap_or_else(|| {
+            panic!(
+                "a killed run leaves its staging folder: {:?}",
+                listing(parent)
+            )
+        });
+    let log =
+        std::fs::read_to_string(parent.join(staging).join("train-log.jsonl")).unwrap_or_default();
+    log.lines()
+        .filter_map(|l| serde_json::from_str::<Value>(l).ok())
+        .filter_map(|v| v["iteration"].as_u64())
+        .max()
+        .unwrap_or(0)
+}
+
+fn test_psnr(scene: &Path) -> f64 {
+    let out = cocog(&["eval", path_str(scene), "--json"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let v: Value = serde_json::from_str(&stdout(&out)).expect("eval JSON");
+    v["mean"]["psnr"]
+        .as_f64()
+        .unwrap_or_else(|| panic!("no PSNR in {v}"))
+}
+
+fn train_args<'a>(scene: &'a Path, out: &'a Path) -> Vec<&'a str> {
+    vec![
+        "train",
+        path_str(scene),
+        "-o",
+        path_str(out),
+        "--iterations",
+        ITERATIONS,
+        "--checkpoint-every",
+        "20",
+        "--seed",
+        "5",
+    ]
+}
+
+#[test]
+fn sigkilled_training_resumes_to_the_uninterrupted_result() {
+    let work = tempfile::tempdir().expect("tempdir");
+    let scene = ingested(work.path());
+    let whole = work.path().join("whole");
+    let out = cocog(&train_args(&scene, &whole));
+    assert!(out.status.success(), "{}", stderr(&out));
+
+    let killed = work.path().join("killed");
+    let ckpt = work.path().join("killed.checkpoint");
+    kill_after_checkpoints(spawn(&train_args(&scene, &killed)), &ckpt);
+    let reached = last_logged_iteration(work.path(), "killed");
+
+    // A fresh run refuses to overwrite the checkpoint; resuming continues it.
+    let out = cocog(&train_args(&scene, &killed));
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    assert!(stderr(&out).contains("--resume"), "{}", stderr(&out));
+    let mut args = train_args(&scene, &killed);
+    args.extend(["--resume", path_str(&ckpt), "--json"]);
+    let out = cocog(&args);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let summary: Value = serde_json::from_str(&stdout(&out)).expect("summary JSON");
+    let from = summary["resumed_from"].as_u64().expect("resumed_from");
+    assert!(
+        from >= EVERY && from + EVERY >= reached,
+        "resumed at {from}, killed past {reached}"
+    );
+
+    let names = listing(work.path());
+    assert_eq!(
+        names,
+        vec!["data", "killed", "scene", "whole"],
+        "left behind"
+    );
+    let (a, b) = (test_psnr(&whole), test_psnr(&killed));
+    eprintln!("killed past {reached}, resumed at {from}: {b:.4} dB vs uninterrupted {a:.4} dB");
+    assert!(
+        (a - b).abs() <= 0.2,
+        "uninterrupted {a:.3} dB, killed and resumed {b:.3} dB"
+    );
+}
+
+#[test]
+fn a_sigkilled_pipeline_resumes_its_training_stage() {
+    let work = tempfile::tempdir().expect("tempdir");
+    write_defocus_dataset(&work.path().join("data"), &SynthConfig::tiny(4)).expect("synth");
+    let pipeline = work.path().join("p.toml");
+    std::fs::write(
+        &pipeline,
+        format!(
+            "[pipeline]\ninput = \"data\"\noutput = \"out\"\nstages = [\"ingest-llff\", \"train\"]\n\
+             [train]\niterations = {ITERATIONS}\ncheckpoint_every = {EVERY}\nseed = 5\n"
+        ),
+    )
+    .expect("write pipeline");
+    // Training is the last stage, so its checkpoint sits beside the pipeline's output.
+    let ckpt = work.path().join("out.checkpoint");
+    kill_after_checkpoints(spawn(&["run", path_str(&pipeline)]), &ckpt);
+    let reached = last_logged_iteration(work.path(), "out");
+
+    let out = cocog(&["run", path_str(&pipeline), "--resume", "--json"]);
+    let err = stderr(&out);
+    assert!(out.status.success(), "{err}");
+    assert!(err.contains("ingest-llff: kept"), "{err}");
+    assert!(err.contains("resuming from"), "{err}");
+    let summary: Value = serde_json::from_str(&stdout(&out)).expect("summary JSON");
+    let from = summary["stages"][1]["summary"]["resumed_from"]
+        .as_u64()
+        .unwrap_or_else(|| panic!("{summary}"));
+    assert!(
+        from >= EVERY && from + EVERY >= reached,
+        "resumed at {from}, killed past {reached}"
+    );
+    assert_eq!(
+        listing(work.path()),
+        vec!["data", "out", "out.stages", "p.toml"]
+    );
+    assert_eq!(
+        listing(&work.path().join("out.stages")),
+        vec!["01-ingest-llff"]
+    );
+    assert!(test_psnr(&work.path().join("out")) > 15.0);
+}
