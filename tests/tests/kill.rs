@@ -59,25 +59,22 @@ fn kill_after_checkpoints(mut child: Child, ckpt: &Path) {
     child.wait().expect("reap");
 }
 
-/// The furthest iteration the killed run logged, from its hidden staging folder.
+/// The furthest iteration the killed run logged (train-log.jsonl in its staging folder,
+/// written line by line).
 fn last_logged_iteration(parent: &Path, output_name: &str) -> u64 {
     let prefix = format!(".{output_name}.cocog-tmp-");
-    let staging = listing(parent)
-        .into_iter()
+    let names = listing(parent);
+    let staging = names
+        .iter()
         .find(|n| n.starts_with(&prefix))
-        .unwrap_or_else(|| {
-            panic!(
-                "a killed run leaves its staging folder: {:?}",
-                listing(parent)
-            )
-        });
-    let log =
-        std::fs::read_to_string(parent.join(staging).join("train-log.jsonl")).unwrap_or_default();
+        .unwrap_or_else(|| panic!("a killed run leaves its staging folder: {names:?}"));
+    let log = std::fs::read_to_string(parent.join(staging).join("train-log.jsonl"))
+        .expect("the killed run's train-log.jsonl");
     log.lines()
         .filter_map(|l| serde_json::from_str::<Value>(l).ok())
         .filter_map(|v| v["iteration"].as_u64())
         .max()
-        .unwrap_or(0)
+        .unwrap_or_else(|| panic!("the killed run logged no iteration:\n{log}"))
 }
 
 fn test_psnr(scene: &Path) -> f64 {

@@ -78,7 +78,11 @@ impl<'c> Session<'c> {
                     "elapsed_s": elapsed,
                     "it_per_s": rate,
                 });
-                writeln!(self.log, "{line}").map_err(|e| StageError::io(&self.log_path, e))?;
+                // Flushed line by line: `tail -f` shows progress, and a killed run's log
+                // still says how far it got.
+                writeln!(self.log, "{line}")
+                    .and_then(|()| self.log.flush())
+                    .map_err(|e| StageError::io(&self.log_path, e))?;
                 if let Some(drop) = psnr.and_then(|p| watch.observe(it, p)) {
                     ctx.warn(&drop_message(&drop));
                 }
