@@ -160,7 +160,29 @@ pub fn run_stage(
             path: output.to_path_buf(),
             source,
         })?;
+    remove_superseded_checkpoint(&req.options, &summary, ctx);
     Ok(summary)
+}
+
+/// A stage that kept an in-progress checkpoint (its `checkpoint_dir` option) says when its
+/// committed output supersedes it; only then, and only that directory, is removed.
+fn remove_superseded_checkpoint(options: &Options, summary: &Value, ctx: &dyn Context) {
+    let done = summary
+        .get("checkpoint_superseded")
+        .and_then(Value::as_bool)
+        == Some(true);
+    let Some(dir) = options
+        .get_path("checkpoint_dir")
+        .filter(|d| done && d.is_dir())
+    else {
+        return;
+    };
+    if let Err(e) = std::fs::remove_dir_all(&dir) {
+        ctx.warn(&format!(
+            "{}: could not remove the finished run's checkpoint: {e}",
+            dir.display()
+        ));
+    }
 }
 
 fn ends_with_separator(p: &Path) -> bool {

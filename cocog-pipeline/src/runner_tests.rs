@@ -1,4 +1,5 @@
-//! The runner's history entry: options as validated, and what the stage resolved.
+//! The runner's history entry (options as validated, and what the stage resolved), and the
+//! checkpoint it removes once a stage's output supersedes it.
 
 use std::path::Path;
 use std::sync::Arc;
@@ -73,4 +74,54 @@ fn history_records_the_options_and_what_the_stage_resolved() {
     std::fs::write(tmp.path().join("again/scene.json"), raw.to_string()).unwrap();
     let old = Scene::load(&tmp.path().join("again")).unwrap();
     assert_eq!(old.history[0].resolved, None);
+}
+
+/// Leaves its checkpoint directory alone and says whether its output supersedes it.
+struct Checkpointing;
+
+impl Stage for Checkpointing {
+    fn info(&self) -> StageInfo {
+        StageInfo {
+            name: "checkpointing".into(),
+            kind: StageKind::Train,
+            output: OutputKind::Dir,
+            description: "test stage".into(),
+            options: vec![
+                OptionSpec::optional("checkpoint_dir", crate::OptionKind::Path, "where"),
+                OptionSpec::bool("done", true, "whether the output supersedes it"),
+            ],
+        }
+    }
+
+    fn run(&self, req: &StageRequest, _ctx: &dyn Context) -> Result<Value, StageError> {
+        Scene::load(&req.input)?.save(&req.output)?;
+        Ok(json!({ "checkpoint_superseded": req.options.get_bool("done") }))
+    }
+}
+
+#[test]
+fn a_superseded_checkpoint_is_removed_after_the_commit_and_only_then() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = tmp.path().join("in");
+    std::fs::create_dir(&input).unwrap();
+    one_view_scene().save(&input).unwrap();
+    let stage: Arc<dyn Stage> = Arc::new(Checkpointing);
+    let entry = StageEntry {
+        info: stage.info(),
+        stage,
+        provider: Provider::BuiltIn,
+    };
+    let ckpt = tmp.path().join("out.checkpoint");
+    for (done, kept) in [(false, true), (true, false)] {
+        std::fs::create_dir_all(&ckpt).unwrap();
+        std::fs::write(ckpt.join("state.safetensors"), b"x").unwrap();
+        let given: Map<String, Value> = serde_json::from_value(json!({
+            "checkpoint_dir": ckpt.display().to_string(), "done": done,
+        }))
+        .unwrap();
+        let out = tmp.path().join("out");
+        run_stage(&entry, &input, &out, &given, true, &NullContext).unwrap();
+        assert!(out.join("scene.json").exists());
+        assert_eq!(ckpt.exists(), kept, "superseded: {done}");
+    }
 }

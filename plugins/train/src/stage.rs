@@ -258,6 +258,7 @@ impl Stage for Train {
         Ok(json!({
             "iterations": plan.config.iterations,
             "resumed_from": start,
+            "checkpoint_superseded": true,
             "gaussians": gaussians.len(),
             "final_loss": outcome.final_loss,
             "final_psnr": outcome.final_psnr,

@@ -227,10 +227,13 @@ fn an_interrupted_run_leaves_a_checkpoint_that_resumes_to_the_end() {
     let summary = run(train.as_ref(), &scene_dir, &done, resumed).unwrap();
     assert_eq!(summary["resumed_from"], 30);
     assert_eq!(summary["iterations"], 60);
+    // The runner removes the in-progress checkpoint once the output is in place.
+    assert_eq!(summary["checkpoint_superseded"], true);
     assert!(
-        !ckpt.exists(),
-        "the in-progress checkpoint is removed on success"
+        ckpt.exists(),
+        "the stage itself never deletes the checkpoint"
     );
+    std::fs::remove_dir_all(&ckpt).unwrap();
     let last = cocog_train::TrainState::load(&done).unwrap();
     assert_eq!(last.iteration, 60);
     let splats = cocog_formats::ply::read_splats(&done.join("gaussians.ply")).unwrap();

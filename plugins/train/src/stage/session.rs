@@ -168,16 +168,15 @@ impl<'c> Session<'c> {
         Ok(())
     }
 
-    /// The final state into the output's `checkpoint/`; the in-progress one is then stale.
+    /// The final state into the output's `checkpoint/`. The in-progress one is then stale,
+    /// but the runner removes it only once the output is in place (the stage's summary says
+    /// `checkpoint_superseded`): if that last rename failed, the run could still resume.
     pub fn save_final(&self, dir: &Path) -> Result<(), StageError> {
         let state = self
             .trainer
             .snapshot(self.downscale)
             .map_err(StageError::other)?;
         state.save(dir).map_err(StageError::other)?;
-        if let Some(stale) = self.checkpoint_dir.as_ref().filter(|d| d.exists()) {
-            std::fs::remove_dir_all(stale).map_err(|e| StageError::io(stale, e))?;
-        }
         Ok(())
     }
 }
