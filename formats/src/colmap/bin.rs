@@ -15,7 +15,7 @@ pub fn read_bin(dir: &Path) -> Result<Model> {
         images: read_images(&dir.join("images.bin"))?,
         points: read_points(&dir.join("points3D.bin"))?,
     };
-    super::validate(&model, dir)?;
+    super::validate(&model, &dir.join("images.bin"))?;
     Ok(model)
 }
 
@@ -52,13 +52,17 @@ pub(crate) fn parse_cameras(path: &Path, data: &[u8]) -> Result<Vec<Camera>> {
                 })
             })
             .collect::<Result<Vec<_>>>()?;
-        out.push(Camera {
+        let cam = Camera {
             id,
             model,
             width,
             height,
             params,
-        });
+        };
+        super::check::camera(&cam, |field, msg| {
+            FormatError::invalid(path, format!("camera {id}.{field}"), msg)
+        })?;
+        out.push(cam);
     }
     r.finish("num_cameras")?;
     Ok(out)
@@ -97,14 +101,18 @@ pub(crate) fn parse_images(path: &Path, data: &[u8]) -> Result<Vec<Image>> {
                 point3d_id: (pid != u64::MAX).then_some(pid),
             });
         }
-        out.push(Image {
+        let img = Image {
             id,
             qvec,
             tvec,
             camera_id,
             name,
             points2d,
-        });
+        };
+        super::check::image(&img, |field, msg| {
+            FormatError::invalid(path, format!("image {id} ({}).{field}", img.name), msg)
+        })?;
+        out.push(img);
     }
     r.finish("num_reg_images")?;
     Ok(out)
@@ -138,13 +146,17 @@ pub(crate) fn parse_points(path: &Path, data: &[u8]) -> Result<Vec<Point3D>> {
                 point2d_idx,
             });
         }
-        out.push(Point3D {
+        let point = Point3D {
             id,
             xyz,
             rgb,
             error,
             track,
-        });
+        };
+        super::check::point(&point, |field, msg| {
+            FormatError::invalid(path, format!("point3D {id}.{field}"), msg)
+        })?;
+        out.push(point);
     }
     r.finish("num_points")?;
     Ok(out)

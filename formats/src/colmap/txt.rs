@@ -67,7 +67,7 @@ pub fn read_txt(dir: &Path) -> Result<Model> {
             &read_text(&dir.join("points3D.txt"))?,
         )?,
     };
-    super::validate(&model, dir)?;
+    super::validate(&model, &dir.join("images.txt"))?;
     Ok(model)
 }
 
@@ -97,13 +97,17 @@ pub(crate) fn parse_cameras(path: &Path, text: &str) -> Result<Vec<Camera>> {
         let params = (0..model.num_params())
             .map(|k| line.get(4 + k, &format!("PARAMS[{k}]")))
             .collect::<Result<_>>()?;
-        out.push(Camera {
+        let cam = Camera {
             id: line.get(0, "CAMERA_ID")?,
             model,
             width: line.get(2, "WIDTH")?,
             height: line.get(3, "HEIGHT")?,
             params,
-        });
+        };
+        super::check::camera(&cam, |field, msg| {
+            line.err(&format!("camera {}.{field}", cam.id), msg)
+        })?;
+        out.push(cam);
     }
     Ok(out)
 }
@@ -161,14 +165,18 @@ pub(crate) fn parse_images(path: &Path, text: &str) -> Result<Vec<Image>> {
                 });
             }
         }
-        out.push(Image {
+        let img = Image {
             id: head.get(0, "IMAGE_ID")?,
             qvec,
             tvec,
             camera_id: head.get(8, "CAMERA_ID")?,
             name: head.tokens[9].to_owned(),
             points2d,
-        });
+        };
+        super::check::image(&img, |field, msg| {
+            head.err(&format!("image {} ({}).{field}", img.id, img.name), msg)
+        })?;
+        out.push(img);
     }
     Ok(out)
 }
@@ -193,13 +201,17 @@ pub(crate) fn parse_points(path: &Path, text: &str) -> Result<Vec<Point3D>> {
                 })
             })
             .collect::<Result<_>>()?;
-        out.push(Point3D {
+        let point = Point3D {
             id: line.get(0, "POINT3D_ID")?,
             xyz: [line.get(1, "X")?, line.get(2, "Y")?, line.get(3, "Z")?],
             rgb: [line.get(4, "R")?, line.get(5, "G")?, line.get(6, "B")?],
             error: line.get(7, "ERROR")?,
             track,
-        });
+        };
+        super::check::point(&point, |field, msg| {
+            line.err(&format!("point3D {}.{field}", point.id), msg)
+        })?;
+        out.push(point);
     }
     Ok(out)
 }
