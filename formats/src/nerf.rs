@@ -28,11 +28,18 @@ impl NerfCamera {
     /// or the image's own when the file has none). Blender files give only `camera_angle_x`:
     /// `fx = fy = W / (2 tan(angle_x / 2))`, principal point at the centre.
     pub fn pinhole(&self, width: f64, height: f64) -> Result<Pinhole, String> {
-        let from_angle = |a: Option<f64>, size: f64| a.map(|a| 0.5 * size / (0.5 * a).tan());
-        let fx = self.fl_x.or_else(|| from_angle(self.camera_angle_x, width));
-        let fy = self
-            .fl_y
-            .or_else(|| from_angle(self.camera_angle_y, height));
+        let fx = focal(
+            self.fl_x,
+            self.camera_angle_x,
+            width,
+            ["fl_x", "camera_angle_x"],
+        )?;
+        let fy = focal(
+            self.fl_y,
+            self.camera_angle_y,
+            height,
+            ["fl_y", "camera_angle_y"],
+        )?;
         let (fx, fy) = match (fx, fy) {
             (Some(x), Some(y)) => (x, y),
             (Some(f), None) | (None, Some(f)) => (f, f),
@@ -40,18 +47,16 @@ impl NerfCamera {
                 return Err("no focal length: expected fl_x/fl_y or camera_angle_x".to_owned());
             }
         };
-        let p = Pinhole {
-            fx,
-            fy,
-            cx: self.cx.unwrap_or(width / 2.0),
-            cy: self.cy.unwrap_or(height / 2.0),
-        };
-        if [p.fx, p.fy, p.cx, p.cy].iter().any(|v| !v.is_finite()) || p.fx <= 0.0 || p.fy <= 0.0 {
-            return Err(format!(
-                "focal lengths must be finite and positive, got {p:?}"
-            ));
+        let cx = self.cx.unwrap_or(width / 2.0);
+        let cy = self.cy.unwrap_or(height / 2.0);
+        for (key, v) in [("cx", cx), ("cy", cy)] {
+            if !v.is_finite() {
+                return Err(format!(
+                    "{key}: expected a finite number of pixels, got {v}"
+                ));
+            }
         }
-        Ok(p)
+        Ok(Pinhole { fx, fy, cx, cy })
     }
 
     fn merge(&self, over: &NerfCamera) -> NerfCamera {
@@ -68,10 +73,58 @@ impl NerfCamera {
     }
 }
 
+/// Focal lengths above this many times the image size (a field of view under about two
+/// microradians) are unit mistakes, and overflow the renderer's f32 arithmetic long before 1e308.
+const MAX_FOCAL_PER_PIXEL: f64 = 1e6;
+
+/// Numbers as a person reads them: `1e308`, not three hundred digits.
+fn show(v: f64) -> String {
+    if v != 0.0 && !(1e-6..1e9).contains(&v.abs()) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
+}
+
+/// The focal length along one axis of `size` pixels, from `keys[0]` (pixels) or else
+/// `keys[1]` (field of view in radians).
+fn focal(
+    fl: Option<f64>,
+    angle: Option<f64>,
+    size: f64,
+    keys: [&str; 2],
+) -> Result<Option<f64>, String> {
+    let (what, f) = match (fl, angle) {
+        (Some(f), _) => (format!("{} = {} px", keys[0], show(f)), f),
+        (None, Some(a)) => (
+            format!(
+                "{} = {} rad gives a focal length of {} px, which",
+                keys[1],
+                show(a),
+                show(0.5 * size / (0.5 * a).tan())
+            ),
+            0.5 * size / (0.5 * a).tan(),
+        ),
+        (None, None) => return Ok(None),
+    };
+    if f.is_finite() && f > 0.0 && f <= MAX_FOCAL_PER_PIXEL * size {
+        return Ok(Some(f));
+    }
+    Err(format!(
+        "{what} is not a usable focal length for an image {} px across: expected above 0 and at most {} px ({} × the size)",
+        show(size),
+        show(MAX_FOCAL_PER_PIXEL * size),
+        show(MAX_FOCAL_PER_PIXEL)
+    ))
+}
+
 #[derive(Debug, Clone, PartialEq)]
 pub struct NerfFrame {
     /// As written in the file, relative to the JSON's directory.
     pub file_path: String,
+    /// The transforms file the frame was read from, and its index in that file's `frames`.
+    pub source: PathBuf,
+    pub index: usize,
     /// `world_from_camera` in OpenCV camera axes (converted from the file's OpenGL axes).
     pub world_from_camera: Mat4,
     pub camera: NerfCamera,
@@ -95,26 +148,59 @@ impl NerfFrame {
     }
 }
 
-fn num(obj: &Map<String, Value>, key: &str, path: &Path, ctx: &str) -> Result<Option<f64>> {
-    match obj.get(key) {
-        None | Some(Value::Null) => Ok(None),
-        Some(v) => v.as_f64().map(Some).ok_or_else(|| {
-            FormatError::invalid(
-                path,
-                format!("{ctx}{key}"),
-                format!("expected a number, got {v}"),
-            )
-        }),
+/// Where a value sits, for messages: the file, `frames[i].` (empty at the top level), and the
+/// frame's `file_path`, which is what a person searches the file for.
+struct Place<'a> {
+    path: &'a Path,
+    ctx: String,
+    image: Option<&'a str>,
+}
+
+impl Place<'_> {
+    fn err(&self, key: &str, message: impl Into<String>) -> FormatError {
+        let mut message = message.into();
+        if let Some(image) = self.image {
+            message = format!("{message} (frame with file_path {image:?})");
+        }
+        let field = format!("{}{key}", self.ctx);
+        FormatError::invalid(self.path, field.trim_end_matches('.'), message)
     }
 }
 
-fn camera(obj: &Map<String, Value>, path: &Path, ctx: &str) -> Result<NerfCamera> {
+fn num(obj: &Map<String, Value>, key: &str, at: &Place) -> Result<Option<f64>> {
+    match obj.get(key) {
+        None | Some(Value::Null) => Ok(None),
+        Some(v) => v
+            .as_f64()
+            .map(Some)
+            .ok_or_else(|| at.err(key, format!("expected a number, got {v}"))),
+    }
+}
+
+/// A number that must lie in `ok`, described by `expected` when it does not.
+fn num_in(
+    obj: &Map<String, Value>,
+    key: &str,
+    at: &Place,
+    ok: impl Fn(f64) -> bool,
+    expected: &str,
+) -> Result<Option<f64>> {
+    match num(obj, key, at)? {
+        Some(v) if !(v.is_finite() && ok(v)) => {
+            Err(at.err(key, format!("expected {expected}, got {}", show(v))))
+        }
+        v => Ok(v),
+    }
+}
+
+fn camera(obj: &Map<String, Value>, at: &Place) -> Result<NerfCamera> {
     for key in ["k1", "k2", "k3", "k4", "p1", "p2"] {
-        if let Some(k) = num(obj, key, path, ctx)?.filter(|k| *k != 0.0) {
+        if let Some(k) = num(obj, key, at)?.filter(|k| *k != 0.0) {
             return Err(FormatError::unsupported(
-                path,
+                at.path,
                 format!(
-                    "{ctx}{key} = {k}: distorted cameras are not supported; undistort the images first"
+                    "{}{key} = {k}: distorted cameras are not supported; undistort the images first",
+                    at.ctx
                 ),
             ));
         }
@@ -125,35 +211,60 @@ fn camera(obj: &Map<String, Value>, path: &Path, ctx: &str) -> Result<NerfCamera
         .filter(|m| !matches!(*m, "PINHOLE" | "OPENCV" | "SIMPLE_PINHOLE"))
     {
         return Err(FormatError::unsupported(
-            path,
+            at.path,
             format!(
-                "{ctx}camera_model {model:?}: only perspective (PINHOLE/OPENCV without distortion) cameras are supported"
+                "{}camera_model {model:?}: only perspective (PINHOLE/OPENCV without distortion) cameras are supported",
+                at.ctx
             ),
         ));
     }
+    let focal = |k| num_in(obj, k, at, |v| v > 0.0, "a focal length above 0 pixels");
+    let centre = |k| num_in(obj, k, at, |_| true, "a finite number of pixels");
+    let size = |k| {
+        num_in(
+            obj,
+            k,
+            at,
+            |v| v.round() >= 1.0 && v.round() <= f64::from(u32::MAX),
+            "an image size of at least 1 pixel",
+        )
+    };
+    let angle = |k| {
+        num_in(
+            obj,
+            k,
+            at,
+            |v| v > 0.0 && v < std::f64::consts::PI,
+            "a field of view in radians, above 0 and below π",
+        )
+    };
     Ok(NerfCamera {
-        fl_x: num(obj, "fl_x", path, ctx)?,
-        fl_y: num(obj, "fl_y", path, ctx)?,
-        cx: num(obj, "cx", path, ctx)?,
-        cy: num(obj, "cy", path, ctx)?,
-        w: num(obj, "w", path, ctx)?,
-        h: num(obj, "h", path, ctx)?,
-        camera_angle_x: num(obj, "camera_angle_x", path, ctx)?,
-        camera_angle_y: num(obj, "camera_angle_y", path, ctx)?,
+        fl_x: focal("fl_x")?,
+        fl_y: focal("fl_y")?,
+        cx: centre("cx")?,
+        cy: centre("cy")?,
+        w: size("w")?,
+        h: size("h")?,
+        camera_angle_x: angle("camera_angle_x")?,
+        camera_angle_y: angle("camera_angle_y")?,
     })
 }
 
-fn matrix(v: Option<&Value>, path: &Path, field: &str) -> Result<Mat4> {
-    let bad = || {
-        FormatError::invalid(
-            path,
-            field,
-            "expected a 4×4 (or 3×4) array of numbers (rows)",
+fn matrix(v: Option<&Value>, at: &Place) -> Result<Mat4> {
+    const KEY: &str = "transform_matrix";
+    let expected = "expected a 4×4 (or 3×4) array of rows of numbers";
+    let rows = v.and_then(Value::as_array).ok_or_else(|| {
+        at.err(
+            KEY,
+            format!("{expected}, got {}", v.unwrap_or(&Value::Null)),
         )
-    };
-    let rows = v.and_then(Value::as_array).ok_or_else(bad)?;
+    })?;
     if !(rows.len() == 4 || rows.len() == 3) {
-        return Err(bad());
+        let n = rows.len();
+        return Err(at.err(
+            KEY,
+            format!("{expected}, got {n} row{}", if n == 1 { "" } else { "s" }),
+        ));
     }
     let mut m = [
         [0.0, 0.0, 0.0, 0.0],
@@ -162,31 +273,48 @@ fn matrix(v: Option<&Value>, path: &Path, field: &str) -> Result<Mat4> {
         [0.0, 0.0, 0.0, 1.0],
     ];
     for (i, row) in rows.iter().enumerate() {
-        let row = row.as_array().filter(|r| r.len() == 4).ok_or_else(bad)?;
+        let row = row.as_array().filter(|r| r.len() == 4).ok_or_else(|| {
+            let got = row
+                .as_array()
+                .map_or(format!("{row}"), |r| format!("{} entries", r.len()));
+            at.err(KEY, format!("{expected}, but row {i} has {got}"))
+        })?;
         for (j, x) in row.iter().enumerate() {
-            // serde_json maps NaN to null; either way it is not a pose.
+            // serde_json maps NaN to null and refuses numbers beyond f64.
             m[i][j] = x.as_f64().ok_or_else(|| {
-                FormatError::invalid(
-                    path,
-                    field,
+                at.err(
+                    KEY,
                     format!("entry [{i}][{j}] is {x}, expected a finite number"),
                 )
             })?;
         }
     }
-    check_rigid(&m, 1e-4).map_err(|e| FormatError::invalid(path, field, e))?;
+    check_rigid(&m, 1e-4).map_err(|e| at.err(KEY, e))?;
     Ok(m)
 }
 
 /// Reads one transforms file; `split` labels frames that carry no `split` key of their own.
 pub fn read_transforms(path: &Path, split: Option<&str>) -> Result<Vec<NerfFrame>> {
     let text = read_text(path)?;
-    let root: Value = serde_json::from_str(&text)
-        .map_err(|e| FormatError::invalid(path, "json", e.to_string()))?;
+    let root: Value = serde_json::from_str(&text).map_err(|e| {
+        let hint = if e.to_string().contains("out of range") {
+            " (a number beyond the range of a 64-bit float)"
+        } else {
+            ""
+        };
+        FormatError::invalid(path, "json", format!("{e}{hint}"))
+    })?;
     let top = root.as_object().ok_or_else(|| {
         FormatError::invalid(path, "json", "expected a JSON object at the top level")
     })?;
-    let top_camera = camera(top, path, "")?;
+    let top_camera = camera(
+        top,
+        &Place {
+            path,
+            ctx: String::new(),
+            image: None,
+        },
+    )?;
     let frames = top
         .get("frames")
         .and_then(Value::as_array)
@@ -195,30 +323,38 @@ pub fn read_transforms(path: &Path, split: Option<&str>) -> Result<Vec<NerfFrame
         .iter()
         .enumerate()
         .map(|(i, f)| {
-            let ctx = format!("frames[{i}].");
+            let mut at = Place {
+                path,
+                ctx: format!("frames[{i}]."),
+                image: None,
+            };
             let obj = f.as_object().ok_or_else(|| {
                 FormatError::invalid(path, format!("frames[{i}]"), "expected an object")
             })?;
             let file_path = obj
                 .get("file_path")
                 .and_then(Value::as_str)
-                .ok_or_else(|| {
-                    FormatError::invalid(path, format!("{ctx}file_path"), "expected a string")
-                })?;
-            let gl = matrix(
-                obj.get("transform_matrix"),
-                path,
-                &format!("{ctx}transform_matrix"),
-            )?;
+                .ok_or_else(|| at.err("file_path", "expected a string"))?;
+            at.image = Some(file_path);
+            let gl = matrix(obj.get("transform_matrix"), &at)?;
+            let cam = top_camera.merge(&camera(obj, &at)?);
+            // With the size in the file the focal can be checked here, naming the file; Blender
+            // files give none, and their readers check against the image's own size.
+            if let (Some(w), Some(h)) = (cam.w, cam.h) {
+                cam.pinhole(w.round(), h.round())
+                    .map_err(|e| at.err("", e))?;
+            }
             let text_of = |k: &str| obj.get(k).and_then(Value::as_str).map(str::to_owned);
             Ok(NerfFrame {
                 file_path: file_path.to_owned(),
+                source: path.to_path_buf(),
+                index: i,
                 world_from_camera: flip_yz_camera_axes(&gl),
-                camera: top_camera.merge(&camera(obj, path, &ctx)?),
+                camera: cam,
                 split: text_of("split").or_else(|| split.map(str::to_owned)),
                 depth_file_path: text_of("depth_file_path"),
-                focus_distance: num(obj, "focus_distance_m", path, &ctx)?,
-                aperture_radius: num(obj, "aperture_radius_m", path, &ctx)?,
+                focus_distance: num(obj, "focus_distance_m", &at)?,
+                aperture_radius: num(obj, "aperture_radius_m", &at)?,
             })
         })
         .collect()

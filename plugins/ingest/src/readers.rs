@@ -171,10 +171,14 @@ pub(crate) fn read_nerf(dataset: &Path) -> Result<Ingested, StageError> {
     let frames = nerf::read_dataset(dataset).map_err(input_error)?;
     let views = frames
         .iter()
-        .enumerate()
-        .map(|(i, f)| {
+        .map(|f| {
             let image = f.image_path(dataset);
-            let source = format!("{}: frames[{i}]", dataset.display());
+            let source = format!(
+                "{}: frames[{}] ({:?})",
+                f.source.display(),
+                f.index,
+                f.file_path
+            );
             // Blender files give no size: the intrinsics then describe the image as it is.
             let size = match (f.camera.w, f.camera.h) {
                 (Some(w), Some(h)) => (w.round() as u32, h.round() as u32),
