@@ -78,43 +78,65 @@ pub fn read_poses_bounds(path: &Path) -> Result<Vec<LlffView>> {
     };
     (0..n)
         .map(|i| {
-            let m = |r: usize, c: usize| at(i, r * 5 + c);
+            let raw: [f64; 17] = std::array::from_fn(|j| at(i, j));
+            check_row(path, i, &raw)?;
+            let m = |r: usize, c: usize| raw[r * 5 + c];
             let mut w = [[0.0; 4]; 4];
             for (r, row) in w.iter_mut().take(3).enumerate() {
                 *row = [m(r, 1), m(r, 0), -m(r, 2), m(r, 3)];
             }
             w[3] = [0.0, 0.0, 0.0, 1.0];
-            let view = LlffView {
-                world_from_camera: w,
-                hwf: [m(0, 4), m(1, 4), m(2, 4)],
-                near: at(i, 15),
-                far: at(i, 16),
-            };
             check_rigid(&w, ROTATION_TOL)
                 .map_err(|e| FormatError::invalid(path, format!("row {i}: pose"), e))?;
-            if view.hwf.iter().any(|v| !v.is_finite() || *v <= 0.0) {
-                return Err(FormatError::invalid(
-                    path,
-                    format!("row {i}: hwf"),
-                    format!(
-                        "expected positive finite height, width, focal; got {:?}",
-                        view.hwf
-                    ),
-                ));
-            }
-            if !(view.near.is_finite() && view.far.is_finite() && view.near < view.far) {
-                return Err(FormatError::invalid(
-                    path,
-                    format!("row {i}: bounds"),
-                    format!(
-                        "expected finite near < far, got {} and {}",
-                        view.near, view.far
-                    ),
-                ));
-            }
-            Ok(view)
+            Ok(LlffView {
+                world_from_camera: w,
+                hwf: [m(0, 4), m(1, 4), m(2, 4)],
+                near: raw[15],
+                far: raw[16],
+            })
         })
         .collect()
+}
+
+/// What column `c` of a row holds, in the file's own terms.
+fn column_name(c: usize) -> String {
+    match c {
+        4 => "height".into(),
+        9 => "width".into(),
+        14 => "focal".into(),
+        15 => "near".into(),
+        16 => "far".into(),
+        _ => format!("pose[{}][{}]", c / 5, c % 5),
+    }
+}
+
+/// Refuses values no camera can have, before they become a pose or a projection.
+fn check_row(path: &Path, i: usize, raw: &[f64; 17]) -> Result<()> {
+    let bad = |c: usize, expected: String| {
+        FormatError::invalid(
+            path,
+            format!("row {i}: {}", column_name(c)),
+            format!("expected {expected}, got {}", raw[c]),
+        )
+    };
+    if let Some(c) = raw.iter().position(|v| !v.is_finite()) {
+        return Err(bad(c, "a finite number".into()));
+    }
+    for c in [4, 9] {
+        if !(1.0..=f64::from(u32::MAX)).contains(&raw[c].round()) {
+            return Err(bad(c, "an image size of at least 1 pixel".into()));
+        }
+    }
+    if raw[14] <= 0.0 {
+        return Err(bad(14, "a focal length above 0 pixels".into()));
+    }
+    if raw[15] <= 0.0 {
+        return Err(bad(15, "a depth above 0".into()));
+    }
+    if raw[16] <= raw[15] {
+        return Err(bad(16, format!("a depth above near ({})", raw[15])));
+    }
+    Ok(())
 }
 
 /// Writes `poses_bounds.npy` as float64, C order, converting OpenCV poses back to LLFF columns.
@@ -140,22 +162,41 @@ pub fn write_poses_bounds(path: &Path, views: &[LlffView]) -> Result<()> {
     })
 }
 
-/// The `hold=N` marker file of Deblur-NeRF-style scenes, if present: test views are `index % N == 0`.
+/// The `hold=N` marker file of Deblur-NeRF-style scenes, if present: test views are
+/// `index % N == 0`; `hold=0` (BAD-Gaussians) means every view trains. The value is in the
+/// name; the file is empty.
 pub fn read_hold_marker(dir: &Path) -> Result<Option<u32>> {
-    let entries = std::fs::read_dir(dir).map_err(|e| FormatError::io(dir, e))?;
-    for entry in entries {
-        let entry = entry.map_err(|e| FormatError::io(dir, e))?;
-        let name = entry.file_name();
-        let Some(value) = name.to_str().and_then(|s| s.strip_prefix("hold=")) else {
-            continue;
-        };
-        return value.parse::<u32>().map(Some).map_err(|_| {
-            FormatError::invalid(
-                entry.path(),
-                "hold",
-                format!("marker file name must be hold=<integer>, got {value:?}"),
-            )
-        });
+    let mut markers = Vec::new();
+    for entry in std::fs::read_dir(dir).map_err(|e| FormatError::io(dir, e))? {
+        let name = entry.map_err(|e| FormatError::io(dir, e))?.file_name();
+        if let Some(name) = name.to_str().filter(|s| s.starts_with("hold=")) {
+            markers.push(name.to_owned());
+        }
     }
-    Ok(None)
+    markers.sort();
+    match &markers[..] {
+        [] => Ok(None),
+        [name] => {
+            let value = &name["hold=".len()..];
+            value.parse::<u32>().map(Some).map_err(|_| {
+                FormatError::invalid(
+                    dir.join(name),
+                    "hold",
+                    format!(
+                        "marker file name must be hold=<non-negative integer up to {}>, got {value:?}",
+                        u32::MAX
+                    ),
+                )
+            })
+        }
+        // Which one wins would depend on directory order.
+        _ => Err(FormatError::invalid(
+            dir,
+            "hold",
+            format!(
+                "expected one hold=N marker file, found {}",
+                markers.join(" and ")
+            ),
+        )),
+    }
 }
