@@ -13,6 +13,7 @@ use serde_json::{Value, json};
 
 use crate::fallback::{FALLBACK_POINTS, fallback_points};
 use crate::input_error;
+use crate::paths::check_inside;
 
 /// One view as a reader found it, before any checks.
 pub(crate) struct RawView {
@@ -43,6 +44,31 @@ pub(crate) struct Settings {
     pub downscale: u32,
     /// 0: use the dataset's own split (per-frame splits, else the hold=N marker, else 8).
     pub hold: u32,
+    /// Accept image and depth paths that lead outside the dataset folder.
+    pub allow_outside: bool,
+}
+
+/// Refusals that need no image read, so a bad dataset or option fails before any work.
+fn preflight(dataset: &Path, views: &[RawView], settings: &Settings) -> Result<(), StageError> {
+    for raw in views {
+        if !settings.allow_outside {
+            check_inside(dataset, &raw.image, "image", &raw.source)?;
+            if let Some(depth) = &raw.depth {
+                check_inside(dataset, depth, "depth", &raw.source)?;
+            }
+        }
+        let (w, h) = raw.size;
+        if settings.downscale > w.min(h) {
+            return Err(StageError::Options(format!(
+                "option 'downscale': {} would shrink the {w}×{h} image of view {:?} (from {}) below 1×1 pixel; expected at most {}",
+                settings.downscale,
+                raw.name,
+                raw.source,
+                w.min(h)
+            )));
+        }
+    }
+    Ok(())
 }
 
 fn absolute(p: &Path) -> String {
@@ -88,6 +114,7 @@ pub(crate) fn build_scene(
             w[1].source, w[1].name
         )));
     }
+    preflight(dataset, &data.views, settings)?;
     let declared = data.views.iter().all(|v| v.split.is_some());
     let hold = match settings.hold {
         0 => data.hold_marker.unwrap_or(8),
@@ -215,6 +242,18 @@ pub(crate) fn build_scene(
     scene.points = Some("points.ply".to_owned());
     scene.save(out)?;
     let test = scene.views_in(Split::Test).count();
+    if test == 0 {
+        // Any hold > 0 makes view 0 a test view, so only these two leave none.
+        let why = if use_declared {
+            "the dataset's own split puts every view in train"
+        } else {
+            "its hold=0 marker means every view trains"
+        };
+        ctx.warn(&format!(
+            "{}: the scene has no test views ({why}); score it with `cocog eval --split train`",
+            dataset.display()
+        ));
+    }
     let summary = json!({
         "views": scene.views.len(),
         "train": scene.views.len() - test,

@@ -8,13 +8,15 @@
 //! has it, else resampling into the scene's `images/`); `hold` chooses the test split: test views
 //! are those whose index in name order is a multiple of `hold`. `hold = 0` (the default) means
 //! "as the dataset says": per-frame splits of transforms.json, else the `hold=N` marker file,
-//! else 8. A dataset without SfM points (LLFF without `sparse/`, transforms.json) starts from
-//! 100k random points: in the train frusta between the near/far bounds when known, else in
-//! INRIA's cube of side 2.6. Ground-truth lens data in a dataset is not copied into the scene: training must not
-//! see it.
+//! else 8; a `hold=0` marker (BAD-Gaussians) trains on every view, with a warning. Image paths
+//! that lead outside the dataset folder are refused unless `allow-outside` is set. A dataset
+//! without SfM points (LLFF without `sparse/`, transforms.json) starts from 100k random points:
+//! in the train frusta between the near/far bounds when known, else in INRIA's cube of side 2.6.
+//! Ground-truth lens data in a dataset is not copied into the scene: training must not see it.
 
 mod build;
 mod fallback;
+mod paths;
 mod readers;
 
 use cocog_formats::FormatError;
@@ -53,6 +55,11 @@ fn common_options() -> Vec<OptionSpec> {
             "hold",
             0,
             "test views are every hold-th view in name order; 0 = the dataset's split, else its hold=N marker, else 8",
+        ),
+        OptionSpec::bool(
+            "allow-outside",
+            false,
+            "accept image paths that lead outside the dataset folder",
         ),
     ]
 }
@@ -108,6 +115,14 @@ impl Stage for Ingest {
         let settings = Settings {
             downscale: int("downscale", 1)?.unwrap_or(1),
             hold: int("hold", 0)?.unwrap_or(0),
+            allow_outside: match req.options.get("allow-outside") {
+                None | Some(Value::Null) => false,
+                Some(v) => v.as_bool().ok_or_else(|| {
+                    StageError::Options(format!(
+                        "option 'allow-outside': expected true or false, got {v}"
+                    ))
+                })?,
+            },
         };
         let dataset = &req.input;
         if !dataset.is_dir() {

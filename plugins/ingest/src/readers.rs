@@ -78,12 +78,21 @@ pub(crate) fn read_colmap(
         .images
         .iter()
         .map(|img| {
-            let source = format!("{}: image {} ({})", dir.display(), img.id, img.name);
+            let source = format!(
+                "{}: image {} ({:?})",
+                colmap::model_file(&dir, "images").display(),
+                img.id,
+                img.name
+            );
             let cam = model.camera(img.camera_id).ok_or_else(|| {
                 StageError::Input(format!("{source}: camera {} missing", img.camera_id))
             })?;
             let intrinsics = cam.pinhole().map_err(|e| {
-                StageError::Input(format!("{}/cameras: camera {}: {e}", dir.display(), cam.id))
+                StageError::Input(format!(
+                    "{}: camera {}: {e}",
+                    colmap::model_file(&dir, "cameras").display(),
+                    cam.id
+                ))
             })?;
             let size = (
                 u32::try_from(cam.width).unwrap_or(u32::MAX),
