@@ -7,6 +7,7 @@ use std::path::Path;
 use npyz::{DType, NpyFile, Order, TypeChar, WriterBuilder};
 
 use crate::atomic::{io_at, write_atomic};
+use crate::colmap::check_focal;
 use crate::error::{FormatError, Result, read_file};
 use crate::pose::{Mat4, check_rigid};
 
@@ -130,6 +131,8 @@ fn check_row(path: &Path, i: usize, raw: &[f64; 17]) -> Result<()> {
     if raw[14] <= 0.0 {
         return Err(bad(14, "a focal length above 0 pixels".into()));
     }
+    check_focal("focal", raw[14], raw[4].min(raw[9]).round())
+        .map_err(|e| FormatError::invalid(path, format!("row {i}: focal"), e))?;
     if raw[15] <= 0.0 {
         return Err(bad(15, "a depth above 0".into()));
     }

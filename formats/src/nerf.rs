@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use serde_json::{Map, Value, json};
 
 use crate::atomic::write_atomic;
-use crate::colmap::Pinhole;
+use crate::colmap::{Pinhole, check_focal, show};
 use crate::error::{FormatError, Result, read_text};
 use crate::pose::{Mat4, check_rigid, flip_yz_camera_axes};
 
@@ -73,19 +73,6 @@ impl NerfCamera {
     }
 }
 
-/// Focal lengths above this many times the image size (a field of view under about two
-/// microradians) are unit mistakes, and overflow the renderer's f32 arithmetic long before 1e308.
-const MAX_FOCAL_PER_PIXEL: f64 = 1e6;
-
-/// Numbers as a person reads them: `1e308`, not three hundred digits.
-fn show(v: f64) -> String {
-    if v != 0.0 && !(1e-6..1e9).contains(&v.abs()) {
-        format!("{v:e}")
-    } else {
-        format!("{v}")
-    }
-}
-
 /// The focal length along one axis of `size` pixels, from `keys[0]` (pixels) or else
 /// `keys[1]` (field of view in radians).
 fn focal(
@@ -94,28 +81,21 @@ fn focal(
     size: f64,
     keys: [&str; 2],
 ) -> Result<Option<f64>, String> {
-    let (what, f) = match (fl, angle) {
-        (Some(f), _) => (format!("{} = {} px", keys[0], show(f)), f),
+    let (key, f) = match (fl, angle) {
+        (Some(f), _) => (keys[0].to_owned(), f),
         (None, Some(a)) => (
             format!(
-                "{} = {} rad gives a focal length of {} px, which",
+                "{} (from {} = {} rad)",
+                keys[0].replace("fl_", "f"),
                 keys[1],
-                show(a),
-                show(0.5 * size / (0.5 * a).tan())
+                show(a)
             ),
             0.5 * size / (0.5 * a).tan(),
         ),
         (None, None) => return Ok(None),
     };
-    if f.is_finite() && f > 0.0 && f <= MAX_FOCAL_PER_PIXEL * size {
-        return Ok(Some(f));
-    }
-    Err(format!(
-        "{what} is not a usable focal length for an image {} px across: expected above 0 and at most {} px ({} × the size)",
-        show(size),
-        show(MAX_FOCAL_PER_PIXEL * size),
-        show(MAX_FOCAL_PER_PIXEL)
-    ))
+    check_focal(&key, f, size)?;
+    Ok(Some(f))
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -288,6 +268,13 @@ fn matrix(v: Option<&Value>, at: &Place) -> Result<Mat4> {
                 )
             })?;
         }
+    }
+    if m[3] != [0.0, 0.0, 0.0, 1.0] {
+        let row: Vec<String> = m[3].iter().map(|v| show(*v)).collect();
+        return Err(at.err(
+            KEY,
+            format!("row 3 is [{}], expected [0, 0, 0, 1]", row.join(", ")),
+        ));
     }
     check_rigid(&m, 1e-4).map_err(|e| at.err(KEY, e))?;
     Ok(m)

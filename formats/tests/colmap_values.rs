@@ -94,3 +94,17 @@ fn bad_image_poses_are_refused() {
     m.images[0].qvec = [0.0; 4];
     assert_names(errors(&m), "images", &["image 3 (a.png)", "qvec", "zero"]);
 }
+
+#[test]
+fn pinhole_focal_lengths_name_the_parameter() {
+    let mut cam = small_model().cameras.remove(0);
+    cam.params[1] = 0.0;
+    let err = cam.pinhole().unwrap_err();
+    assert!(
+        err.contains("params[1]") && err.contains("fy") && !err.contains("0.0,"),
+        "{err}"
+    );
+    cam.params[1] = 1e308;
+    let err = cam.pinhole().unwrap_err();
+    assert!(err.contains("fy") && err.contains("at most"), "{err}");
+}

@@ -107,3 +107,9 @@ fn hold_markers_must_be_one_non_negative_integer() {
         "{err}"
     );
 }
+
+#[test]
+fn absurd_focal_lengths_are_refused() {
+    let e = err_with(14, 1e308);
+    assert!(e.contains("row 1: focal") && e.contains("at most"), "{e}");
+}

@@ -147,3 +147,13 @@ fn frames_know_their_file() {
         Some(Path::new("transforms.json").as_os_str())
     );
 }
+
+#[test]
+fn transform_matrix_last_row_is_shown_plainly() {
+    let mut d = doc();
+    d["frames"][1]["transform_matrix"][3][3] = json!(2);
+    assert_clear(
+        &read_err(&d.to_string()),
+        &["frames[1].transform_matrix", "row 3", "[0, 0, 0, 2]"],
+    );
+}

@@ -5,6 +5,33 @@
 use super::{Camera, Image, Point3D};
 use crate::error::{FormatError, Result};
 
+/// Focal lengths above this many times the image size (a field of view under about two
+/// microradians) are unit mistakes, and overflow the renderer's f32 arithmetic long before 1e308.
+pub(crate) const MAX_FOCAL_PER_PIXEL: f64 = 1e6;
+
+/// Numbers as a person reads them: `1e308`, not three hundred digits.
+pub(crate) fn show(v: f64) -> String {
+    if v != 0.0 && !(1e-6..1e9).contains(&v.abs()) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
+}
+
+/// Why focal length `key = f` cannot be used for an image `size` pixels across, if it cannot.
+pub(crate) fn focal(key: &str, f: f64, size: f64) -> Result<(), String> {
+    if f.is_finite() && f > 0.0 && f <= MAX_FOCAL_PER_PIXEL * size {
+        return Ok(());
+    }
+    Err(format!(
+        "{key} = {} px is not a usable focal length for an image {} px across: expected above 0 and at most {} px ({} × the size)",
+        show(f),
+        show(size),
+        show(MAX_FOCAL_PER_PIXEL * size),
+        show(MAX_FOCAL_PER_PIXEL)
+    ))
+}
+
 fn finite(values: &[f64], name: &str, err: &impl Fn(&str, String) -> FormatError) -> Result<()> {
     match values.iter().position(|v| !v.is_finite()) {
         Some(k) => Err(err(

@@ -15,6 +15,8 @@ pub use bin::{read_bin, write_bin};
 pub use model::{CameraModel, Pinhole, pinhole};
 pub use txt::{read_txt, write_txt};
 
+pub(crate) use check::{focal as check_focal, show};
+
 use crate::error::{FormatError, Result};
 use crate::pose::{self, Mat4};
 
@@ -30,7 +32,10 @@ pub struct Camera {
 impl Camera {
     /// Pinhole intrinsics, or why this camera has none (see [`pinhole`]).
     pub fn pinhole(&self) -> Result<Pinhole, String> {
-        pinhole(self.model, &self.params)
+        let p = pinhole(self.model, &self.params)?;
+        check_focal("fx", p.fx, self.width as f64)?;
+        check_focal("fy", p.fy, self.height as f64)?;
+        Ok(p)
     }
 }
 

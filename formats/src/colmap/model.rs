@@ -115,7 +115,7 @@ pub fn pinhole(model: CameraModel, params: &[f64]) -> Result<Pinhole, String> {
             params.len()
         ));
     }
-    let (intr, distortion) = match model {
+    let (intr, distortion, names) = match model {
         M::SimplePinhole | M::SimpleRadial | M::Radial => (
             Pinhole {
                 fx: params[0],
@@ -124,6 +124,7 @@ pub fn pinhole(model: CameraModel, params: &[f64]) -> Result<Pinhole, String> {
                 cy: params[2],
             },
             &params[3..],
+            &["f", "cx", "cy"][..],
         ),
         M::Pinhole | M::OpenCv | M::FullOpenCv => (
             Pinhole {
@@ -133,6 +134,7 @@ pub fn pinhole(model: CameraModel, params: &[f64]) -> Result<Pinhole, String> {
                 cy: params[3],
             },
             &params[4..],
+            &["fx", "fy", "cx", "cy"][..],
         ),
         other => {
             return Err(format!(
@@ -147,11 +149,19 @@ pub fn pinhole(model: CameraModel, params: &[f64]) -> Result<Pinhole, String> {
             model.name()
         ));
     }
-    let all = [intr.fx, intr.fy, intr.cx, intr.cy];
-    if all.iter().any(|v| !v.is_finite()) || intr.fx <= 0.0 || intr.fy <= 0.0 {
-        return Err(format!(
-            "focal lengths must be finite and positive, got {all:?}"
-        ));
+    for (k, (name, v)) in names.iter().zip(params).enumerate() {
+        let focal = name.starts_with('f');
+        if !v.is_finite() || (focal && *v <= 0.0) {
+            let expected = if focal {
+                "a focal length above 0 pixels"
+            } else {
+                "a finite number of pixels"
+            };
+            return Err(format!(
+                "params[{k}] ({name}) of {} is {v}, expected {expected}",
+                model.name()
+            ));
+        }
     }
     Ok(intr)
 }
