@@ -89,3 +89,37 @@ fn a_killed_runs_temp_folder_is_cleaned_by_the_next_run() {
     assert!(out.status.success(), "{}", stderr(&out));
     assert_eq!(listing(work.path()), vec!["dense", "scene"]);
 }
+
+#[test]
+fn image_paths_outside_the_dataset_need_allow_outside() {
+    let work = tempfile::tempdir().expect("tempdir");
+    let data = work.path().join("data");
+    cocog_synth::write_defocus_dataset(&data, &cocog_synth::SynthConfig::tiny(2)).expect("synth");
+    let nerf = work.path().join("nerf");
+    std::fs::create_dir(&nerf).expect("mkdir");
+    let frames: Vec<_> = (0..4)
+        .map(|i| {
+            serde_json::json!({
+                "file_path": format!("../data/images/{i:03}.png"),
+                "transform_matrix": [[1, 0, 0, 0.1 * f64::from(i)], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]],
+            })
+        })
+        .collect();
+    let transforms = serde_json::json!({ "camera_angle_x": 0.8, "frames": frames });
+    std::fs::write(nerf.join("transforms.json"), transforms.to_string()).expect("write");
+    let scene = work.path().join("scene");
+    let args = ["ingest", "nerf", path_str(&nerf), "-o", path_str(&scene)];
+    let out = cocog(&args);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("transforms.json") && err.contains("../data/images/000.png"),
+        "{err}"
+    );
+    assert!(err.contains("--allow-outside"), "{err}");
+    assert!(!scene.exists());
+    let mut allowed = args.to_vec();
+    allowed.push("--allow-outside");
+    let out = cocog(&allowed);
+    assert!(out.status.success(), "{}", stderr(&out));
+}
