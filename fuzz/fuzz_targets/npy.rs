@@ -1,0 +1,5 @@
+#![no_main]
+
+libfuzzer_sys::fuzz_target!(init: cocog_fuzz::init("npy"), |data: &[u8]| {
+    let _ = cocog_fuzz::npy(data);
+});
