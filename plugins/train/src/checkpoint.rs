@@ -199,10 +199,12 @@ impl<'a> Reader<'a> {
             .st
             .tensor(name)
             .map_err(|_| self.fail(format!("tensor `{name}` is missing")))?;
-        if t.dtype() != Dtype::F32 || t.data().len() != rows * per * 4 {
+        // `rows` comes from the file's metadata: an absurd count must not overflow.
+        let bytes = rows.checked_mul(per).and_then(|v| v.checked_mul(4));
+        if t.dtype() != Dtype::F32 || bytes != Some(t.data().len()) {
             return Err(self.fail(format!(
                 "tensor `{name}` should be {} f32 values ({rows} Gaussians × {per}), found {:?} of {} bytes",
-                rows * per,
+                rows as u128 * per as u128,
                 t.dtype(),
                 t.data().len()
             )));
