@@ -10,6 +10,7 @@ pub mod glb;
 pub mod images;
 pub mod llff;
 pub mod nerf;
+mod npy_header;
 pub mod ply;
 pub mod pose;
 pub mod rng;

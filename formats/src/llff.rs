@@ -28,6 +28,9 @@ const ROTATION_TOL: f64 = 1e-4;
 /// Reads `poses_bounds.npy`: float32 or float64, either byte order, C or Fortran layout.
 pub fn read_poses_bounds(path: &Path) -> Result<Vec<LlffView>> {
     let bytes = read_file(path)?;
+    crate::npy_header::vet(&bytes).map_err(|why| {
+        FormatError::invalid(path, "header", format!("not a valid .npy file: {why}"))
+    })?;
     let npy = NpyFile::new(&bytes[..])
         .map_err(|e| FormatError::invalid(path, "header", format!("not a .npy file: {e}")))?;
     let shape = npy.shape().to_vec();

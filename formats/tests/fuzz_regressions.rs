@@ -69,9 +69,6 @@ fn glb_regressions() {
 }
 
 #[test]
-#[ignore = "npyz hangs on a header with nested brackets (py_literal backtracks exponentially) \
-            and overflows on a huge shape: read_poses_bounds needs llff.rs to vet the header \
-            before npyz parses it"]
 fn npy_regressions() {
     replay("npy", |data| {
         let (_dir, path) = staged("poses_bounds.npy", data);
