@@ -124,3 +124,19 @@ fn small_model() -> Model {
         }],
     }
 }
+
+#[test]
+fn scene_json_regressions() {
+    replay("scene_json", |data| {
+        let (dir, _) = staged(cocog_pipeline::scene::MANIFEST, data);
+        let _ = cocog_pipeline::Scene::load(dir.path());
+    });
+}
+
+#[test]
+fn checkpoint_regressions() {
+    replay("checkpoint", |data| {
+        let (_dir, path) = staged(cocog_train::CHECKPOINT_FILE, data);
+        let _ = cocog_train::TrainState::load(&path);
+    });
+}
