@@ -52,6 +52,8 @@ struct Step<'a> {
     name: &'a str,
     entry: &'a StageEntry,
     options: Map<String, Value>,
+    /// The options with defaults filled in, as a finished run's history records them.
+    validated: Options,
     output: PathBuf,
     checkpoint: Option<PathBuf>,
 }
@@ -113,12 +115,13 @@ pub fn run_pipeline(
             Some(_) => return Err(bad(format!("[{name}] must be a table of options"))),
             None => Map::new(),
         };
-        Options::validate(name, &entry.info.options, &options).map_err(|source| {
-            RunError::Stage {
-                stage: name.clone(),
-                source,
-            }
-        })?;
+        let validated =
+            Options::validate(name, &entry.info.options, &options).map_err(|source| {
+                RunError::Stage {
+                    stage: name.clone(),
+                    source,
+                }
+            })?;
         let step_out = if last {
             output.clone()
         } else {
@@ -129,6 +132,7 @@ pub fn run_pipeline(
             name,
             entry,
             options,
+            validated,
             output: step_out,
             checkpoint,
         });
@@ -213,26 +217,19 @@ fn finished_before(step: &Step, input: &Path) -> bool {
     let Some(last) = scene.history.last() else {
         return false;
     };
-    let Ok(wanted) = Options::validate(step.name, &step.entry.info.options, &step.options) else {
-        return false;
-    };
     last.stage == step.entry.info.name
         && canonical(Path::new(&last.input)) == canonical(input)
-        && same_options(
-            &last.options,
-            &serde_json::to_value(wanted).unwrap_or(Value::Null),
-        )
+        && same_options(&last.options, &step.validated)
 }
 
-fn same_options(recorded: &Value, wanted: &Value) -> bool {
-    let strip = |v: &Value| -> Map<String, Value> {
-        let mut m = v.as_object().cloned().unwrap_or_default();
-        for k in RUNNER_OPTIONS {
-            m.remove(k);
-        }
-        m
-    };
-    strip(recorded) == strip(wanted)
+fn same_options(recorded: &Value, wanted: &Options) -> bool {
+    let mut recorded = recorded.as_object().cloned().unwrap_or_default();
+    let mut wanted = wanted.0.clone();
+    for k in RUNNER_OPTIONS {
+        recorded.remove(k);
+        wanted.remove(k);
+    }
+    recorded == wanted
 }
 
 /// TOML to JSON for stage options; NaN and infinities are refused here because JSON (the

@@ -6,7 +6,6 @@ use std::sync::Arc;
 
 use walkdir::WalkDir;
 
-use super::exports::exports_entry;
 use super::host::{LoadedPlugin, PluginError};
 
 /// The environment variable holding extra plugin directories (OS path-list syntax).
@@ -70,16 +69,16 @@ pub fn discover(dirs: &[PathBuf]) -> Discovery {
                 found.skipped.push((path.to_path_buf(), why));
                 continue;
             }
-            match exports_entry(path) {
-                Ok(true) => match LoadedPlugin::load(path) {
-                    Ok(p) => found.plugins.push(p),
-                    Err(e) => found.errors.push(e),
-                },
-                Ok(false) => found.skipped.push((
+            match LoadedPlugin::load(path) {
+                Ok(p) => found.plugins.push(p),
+                Err(PluginError::MissingSymbol { .. }) => found.skipped.push((
                     path.to_path_buf(),
                     "does not export the plugin entry".into(),
                 )),
-                Err(why) => found.skipped.push((path.to_path_buf(), why)),
+                Err(PluginError::NotALibrary { message, .. }) => {
+                    found.skipped.push((path.to_path_buf(), message));
+                }
+                Err(e) => found.errors.push(e),
             }
         }
     }

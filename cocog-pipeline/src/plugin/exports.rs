@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use object::{Object, ObjectSymbol};
+use object::Object;
 
 use super::abi::ENTRY_SYMBOL;
 
@@ -15,16 +15,10 @@ pub fn exports_entry(path: &Path) -> Result<bool, String> {
     let wanted = |name: &[u8]| {
         name == ENTRY_SYMBOL.as_bytes() || name.strip_prefix(b"_") == Some(ENTRY_SYMBOL.as_bytes())
     };
-    if let Ok(exports) = file.exports()
-        && exports.iter().any(|e| wanted(e.name()))
-    {
-        return Ok(true);
-    }
-    // ELF's export list is its dynamic symbol table; read it directly too, in case a
-    // format's `exports` leaves out what the loader would find.
-    Ok(file
-        .dynamic_symbols()
-        .any(|s| s.is_global() && s.is_definition() && s.name_bytes().is_ok_and(wanted)))
+    let exports = file
+        .exports()
+        .map_err(|e| format!("cannot read its export table: {e}"))?;
+    Ok(exports.iter().any(|e| wanted(e.name())))
 }
 
 #[cfg(test)]

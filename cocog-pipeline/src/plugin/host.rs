@@ -18,6 +18,8 @@ use crate::stage::{Stage, StageError, StageInfo, StageRequest};
 pub enum PluginError {
     #[error("{path}: cannot load as a library: {message}")]
     Load { path: PathBuf, message: String },
+    #[error("{path}: {message}")]
+    NotALibrary { path: PathBuf, message: String },
     #[error("{path}: not a cocog plugin: it does not export the symbol `{ENTRY_SYMBOL}`")]
     MissingSymbol { path: PathBuf },
     #[error("{path}: `{ENTRY_SYMBOL}` returned a null descriptor")]
@@ -57,7 +59,9 @@ unsafe impl Send for LoadedPlugin {}
 unsafe impl Sync for LoadedPlugin {}
 
 impl LoadedPlugin {
-    /// Loads `path`, checks its ABI version and reads its descriptor.
+    /// Loads `path`, checks its ABI version and reads its descriptor. A file that is not a
+    /// library ([`PluginError::NotALibrary`]) or lacks the entry point
+    /// ([`PluginError::MissingSymbol`]) is never opened.
     pub fn load(path: &Path) -> Result<Arc<Self>, PluginError> {
         let path = path.to_path_buf();
         // Read before opening: dlopen runs the library's constructors, and a library that
@@ -65,7 +69,7 @@ impl LoadedPlugin {
         match super::exports::exports_entry(&path) {
             Ok(true) => {}
             Ok(false) => return Err(PluginError::MissingSymbol { path }),
-            Err(message) => return Err(PluginError::Load { path, message }),
+            Err(message) => return Err(PluginError::NotALibrary { path, message }),
         }
         // SAFETY: loading a library runs its initialisers; that is the trust a user gives
         // a plugin by putting it on the plugin path, and it exports our entry point.
