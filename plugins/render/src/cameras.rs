@@ -62,7 +62,9 @@ pub fn split_cameras(
         let which = split.map_or("any", split_name);
         // Only render/eval choose the test split; train asks for its own and has no flag.
         let hint = if split == Some(Split::Test) {
-            "; pick other views with --split all (or --split train)"
+            " (every view is a training view, e.g. ingested with --hold 0); to hold \
+             some out, ingest again with --hold 8 (every 8th photo becomes a test view), or \
+             use the training views with --split train (or --split all)"
         } else {
             ""
         };

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use cocog_engine::GpuContext;
-use cocog_pipeline::{Context, Scene, StageError};
+use cocog_pipeline::{Context, Scene, Split, StageError};
 use serde::Serialize;
 
 use crate::stage::load;
@@ -57,6 +57,34 @@ pub struct BenchReport {
     pub peak_gpu_bytes: u64,
     /// Peak resident memory of the whole process (Linux VmHWM), when known.
     pub peak_host_bytes: Option<u64>,
+    /// Engine operations per timed iteration (densification iterations included).
+    pub per_iteration: OpsPerIteration,
+}
+
+/// Mean engine operations per iteration: what issue #11's execution model drives to
+/// (0, 0, 1) for buffers, blocking reads and submissions.
+#[derive(Clone, Debug, Serialize)]
+pub struct OpsPerIteration {
+    pub buffers_created: f64,
+    pub blocking_reads: f64,
+    pub throttle_waits: f64,
+    pub submissions: f64,
+    pub dispatches: f64,
+    pub bind_groups_created: f64,
+}
+
+impl OpsPerIteration {
+    fn from(c: cocog_engine::CounterSnapshot, n: u32) -> Self {
+        let per = |v: u64| v as f64 / f64::from(n.max(1));
+        Self {
+            buffers_created: per(c.buffers_created),
+            blocking_reads: per(c.blocking_reads),
+            throttle_waits: per(c.throttle_waits),
+            submissions: per(c.submissions),
+            dispatches: per(c.dispatches),
+            bind_groups_created: per(c.bind_groups_created),
+        }
+    }
 }
 
 fn per_iteration(t: &PhaseTimes, n: u32) -> PhaseMs {
@@ -105,9 +133,10 @@ pub fn run_bench(
         ..TrainConfig::default()
     };
     let scratch = tempfile_dir(scene_dir)?;
-    let views = load::train_views(
+    let views = load::split_views(
         &scene,
         scene_dir,
+        Split::Train,
         opts.downscale,
         config.background,
         scratch.path(),
@@ -134,12 +163,14 @@ pub fn run_bench(
     }
     gpu.wait().map_err(StageError::other)?;
     gpu.memory.reset_peak();
+    let ops_before = gpu.counters.snapshot();
     let clock = Instant::now();
     for i in 0..opts.iterations {
         step(opts.warmup + i)?;
     }
     gpu.wait().map_err(StageError::other)?;
     let seconds = clock.elapsed().as_secs_f64();
+    let ops = gpu.counters.snapshot() - ops_before;
     trainer.set_profiling(true);
     let mut phases = PhaseTimes::default();
     for i in 0..opts.iterations {
@@ -168,6 +199,7 @@ pub fn run_bench(
         phases_ms: per_iteration(&phases, n),
         peak_gpu_bytes: gpu.memory.peak_bytes(),
         peak_host_bytes: peak_host_bytes(),
+        per_iteration: OpsPerIteration::from(ops, n),
     })
 }
 
@@ -193,6 +225,7 @@ impl BenchReport {
              Gaussians        {} → {} (from iteration {})\n\
              throughput       {:.2} it/s, {:.1} ms/iteration ({} iterations)\n\
              profiled ms/it   forward {:.1} | backward {:.1} | optimizer {:.1} | density {:.1} | sum {:.1}\n\
+             engine ops/it    {:.2} buffers created | {:.2} blocking reads | {:.2} submissions | {:.1} dispatches | {:.2} bind groups created\n\
              peak GPU memory  {:.1} MiB (engine buffers)\n\
              peak host memory {host}\n",
             self.adapter,
@@ -212,6 +245,11 @@ impl BenchReport {
             p.optimizer,
             p.density,
             p.total,
+            self.per_iteration.buffers_created,
+            self.per_iteration.blocking_reads,
+            self.per_iteration.submissions,
+            self.per_iteration.dispatches,
+            self.per_iteration.bind_groups_created,
             mib(self.peak_gpu_bytes),
         )
     }

@@ -35,7 +35,7 @@ pub use order::{SplitMix64, ViewOrder};
 pub use scale::{depth_scene_scale, median_depth};
 pub use stage::Train;
 pub use stats::GradStats;
-pub use trainer::{PhaseTimes, StepStats, TrainView, Trainer};
+pub use trainer::{PhaseTimes, Reading, StepStats, TrainView, Trainer};
 
 /// The stages this crate provides to the pipeline host.
 pub fn stages() -> Vec<Box<dyn cocog_pipeline::Stage>> {

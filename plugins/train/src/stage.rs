@@ -1,20 +1,23 @@
 //! The `train` pipeline stage: scene + points.ply in, scene + gaussians.ply out.
 
 pub(crate) mod load;
+mod log;
 mod schedule;
 mod session;
+mod test_eval;
 
 use std::path::PathBuf;
 
 use cocog_engine::GpuContext;
 use cocog_pipeline::{
-    Context, OptionKind, OptionSpec, OutputKind, Scene, Stage, StageError, StageInfo, StageKind,
-    StageRequest,
+    Context, OptionKind, OptionSpec, OutputKind, Scene, Split, Stage, StageError, StageInfo,
+    StageKind, StageRequest,
 };
 use serde_json::{Value, json};
 
 use crate::{TrainConfig, TrainState, Trainer};
 use schedule::Schedule;
+use test_eval::TestViews;
 
 /// Vanilla 3DGS now; CoCoGaussian (`method = "cocog"`) is refused until it exists.
 pub struct Train;
@@ -66,6 +69,20 @@ fn options() -> Vec<OptionSpec> {
             1000,
             "iterations between checkpoints in checkpoint_dir; 0 only on interruption",
         ),
+        OptionSpec::optional(
+            "live_log",
+            OptionKind::Path,
+            "where to write train-log.jsonl while training, line by line (tail -f it); \
+             copied into the output when the run succeeds, then removed; kept with the \
+             checkpoint when it is interrupted. Default: inside the output only; the CLI uses \
+             OUTPUT.train-log.jsonl",
+        ),
+        OptionSpec::int(
+            "eval_every",
+            0,
+            "score the test views (PSNR, SSIM) every N iterations and at the end, into the \
+             log as `eval` records; 0 never",
+        ),
     ];
     specs.extend(schedule::options());
     specs
@@ -113,6 +130,8 @@ struct Plan {
     resume: Option<PathBuf>,
     checkpoint_dir: Option<PathBuf>,
     checkpoint_every: u32,
+    live_log: Option<PathBuf>,
+    eval_every: u32,
 }
 
 fn plan(req: &StageRequest) -> Result<Plan, StageError> {
@@ -137,6 +156,8 @@ fn plan(req: &StageRequest) -> Result<Plan, StageError> {
         resume: req.options.get_path("resume"),
         checkpoint_dir: req.options.get_path("checkpoint_dir"),
         checkpoint_every: int(req, "checkpoint_every", 0, i64::from(u32::MAX))? as u32,
+        live_log: req.options.get_path("live_log"),
+        eval_every: int(req, "eval_every", 0, i64::from(u32::MAX))? as u32,
     })
 }
 
@@ -212,7 +233,11 @@ impl Stage for Train {
         // The scale comes from the initial points even when resuming, so a resumed run
         // continues with the scale it started with.
         let points = load::initial_gaussians(&scene, &req.input)?;
-        let views = load::train_views_scratch(&scene, req, plan.downscale, &plan.config, ctx)?;
+        let views =
+            load::views_scratch(&scene, req, Split::Train, plan.downscale, &plan.config, ctx)?;
+        let test = (plan.eval_every > 0)
+            .then(|| TestViews::load(&scene, req, plan.downscale, &plan.config, ctx))
+            .transpose()?;
         let cameras: Vec<_> = views.iter().map(|v| v.camera).collect();
         let scene_scale = plan
             .schedule
@@ -245,7 +270,18 @@ impl Stage for Train {
         .map_err(|e| StageError::Input(format!("{}: {e}", req.input.display())))?;
         drop((views, init, resume));
 
-        let mut session = session::Session::new(trainer, &plan, &req.output)?;
+        let start_record = json!({
+            "iteration": start,
+            "iterations": plan.config.iterations,
+            "resume": plan.resume,
+            "gaussians": trainer.num_gaussians(),
+            "views": trainer.num_views(),
+            "test_views": test.as_ref().map(TestViews::len),
+            "downscale": plan.downscale,
+            "adapter": adapter,
+        });
+        let mut session =
+            session::Session::new(trainer, &plan, &req.output, test, &start_record, ctx)?;
         let outcome = session.run(ctx)?;
 
         let gaussians = session.trainer.gaussians().map_err(StageError::other)?;
@@ -253,6 +289,7 @@ impl Stage for Train {
         cocog_formats::ply::write_splats(&ply, &(&gaussians).into(), None)
             .map_err(StageError::other)?;
         session.save_final(&req.output.join("checkpoint"))?;
+        session.finish_log(&req.output)?;
         scene.gaussians = Some("gaussians.ply".to_owned());
         scene.save(&req.output)?;
         Ok(json!({
@@ -266,6 +303,8 @@ impl Stage for Train {
             "it_per_s": outcome.it_per_s,
             "adapter": adapter,
             "last_psnr_drop": outcome.last_drop.map(|d| d.iteration),
+            "test_psnr": outcome.test.as_ref().map(|t| t.psnr),
+            "test_ssim": outcome.test.as_ref().and_then(|t| t.ssim),
             "resolved": { "schedule": schedule },
         }))
     }

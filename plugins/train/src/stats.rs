@@ -1,6 +1,6 @@
 //! Densification statistics accumulated on the GPU every iteration; see stats.wgsl.
 
-use cocog_engine::{ForwardState, GpuBuffer, GpuContext, Gradients, Kernel, shader};
+use cocog_engine::{ForwardState, GpuBuffer, GpuContext, Gradients, Kernel, Recorder, shader};
 
 use crate::TrainError;
 
@@ -63,33 +63,34 @@ impl GradStats {
         self.len = num_gaussians;
     }
 
-    /// Adds one single-image pass of `width`×`height` (no sync).
+    /// Records adding one single-image pass of `width`×`height`; a pass whose intersection
+    /// buffers overflowed (`state.status`) adds nothing.
     pub fn accumulate(
         &self,
-        ctx: &GpuContext,
+        rec: &mut Recorder,
         state: &ForwardState,
         grads: &Gradients,
         width: u32,
         height: u32,
     ) {
-        let params = Params {
+        let uniform = rec.uniform(&Params {
             n: self.len,
             half_width: 0.5 * width as f32,
             half_height: 0.5 * height as f32,
             pad: 0,
-        };
-        let mut enc = ctx.device.create_command_encoder(&Default::default());
-        let uniform = ctx.uniform(&params);
-        let bindings = [
-            (0, &uniform),
-            (1, &state.projected.buffer),
-            (2, &grads.v_projected.buffer),
-            (3, &self.accum.buffer),
-            (4, &self.denom.buffer),
-        ];
-        self.kernel
-            .dispatch_1d(ctx, &mut enc, &bindings, self.len.div_ceil(256));
-        ctx.queue.submit([enc.finish()]);
+        });
+        self.kernel.dispatch_1d(
+            rec,
+            &[
+                (0, &uniform),
+                (1, &state.projected),
+                (2, &grads.v_projected),
+                (3, &self.accum),
+                (4, &self.denom),
+                (5, &state.status),
+            ],
+            self.len.div_ceil(256),
+        );
     }
 
     /// Mean gradient norm per Gaussian, 0 where never visible (INRIA turns its NaN into 0).

@@ -17,11 +17,13 @@ struct Params {
 @group(0) @binding(2) var<storage, read> v_projected: array<f32>;
 @group(0) @binding(3) var<storage, read_write> accum: array<f32>;
 @group(0) @binding(4) var<storage, read_write> denom: array<f32>;
+// The renderer's status: [0] != 0 when its intersection buffers overflowed (a skipped step).
+@group(0) @binding(5) var<storage, read> status: array<u32>;
 
 @compute @workgroup_size(256)
 fn accumulate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
     let i = gid.x + gid.y * nwg.x * 256u;
-    if (i >= params.n || projected[12u * i + 7u] <= 0.0) {
+    if (i >= params.n || status[0] != 0u || projected[12u * i + 7u] <= 0.0) {
         return;
     }
     let g = vec2<f32>(v_projected[10u * i] * params.half_width, v_projected[10u * i + 1u] * params.half_height);

@@ -1,14 +1,21 @@
 //! The training loop: one view per iteration, forward → loss → backward → per-group Adam.
 
+use std::collections::VecDeque;
+
 use cocog_engine::{
     Adam, AdamConfig, AdamMoments, Batch, Camera, GaussianParams, GpuBuffer, GpuContext, ImageLoss,
-    ImageSpec, MAX_SH_DEGREE, ParamBuffers, RenderedImage, Renderer, sh_coeffs_per_channel,
+    ImageSpec, Kernel, LossOutput, MAX_SH_DEGREE, ParamBuffers, Readback, Recorder, RenderedImage,
+    Renderer, Workspace, sh_coeffs_per_channel,
 };
 
 use crate::{GradStats, SplitMix64, TrainConfig, TrainError, ViewOrder, scene_extent};
 
+mod capacity;
 mod density;
 mod snapshot;
+
+/// Steps the CPU may run ahead of the GPU; their read-backs arrive this many steps late.
+const IN_FLIGHT: usize = 3;
 
 /// One training image: its camera and its linear RGB pixels, row-major, `width × height`.
 #[derive(Clone, Debug)]
@@ -26,13 +33,35 @@ pub struct StepStats {
     pub sh_degree: u32,
     /// Gaussians after this iteration's densification, if any.
     pub num_gaussians: u32,
-    /// Only on iterations divisible by `TrainConfig::loss_every` (reading it syncs the GPU).
-    pub loss: Option<f64>,
-    /// PSNR (dB) of this iteration's render against its view, on the same iterations as
-    /// `loss`; colours clamped to [0, 1] as a saved image would be.
-    pub psnr: Option<f64>,
+    /// Loss and PSNR of earlier iterations (divisible by `TrainConfig::loss_every`) whose
+    /// asynchronous read-back arrived during this one, oldest first.
+    pub readings: Vec<Reading>,
     /// Wall time per phase, only while `Trainer::set_profiling(true)`.
     pub phases: Option<PhaseTimes>,
+}
+
+/// The loss and PSNR of one logged iteration, read back without stalling the GPU.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Reading {
+    pub iteration: u32,
+    pub view: usize,
+    /// Gaussians and SH degree the iteration trained.
+    pub num_gaussians: u32,
+    pub sh_degree: u32,
+    pub loss: f64,
+    /// dB, of the render clamped to [0, 1] as a saved image would be, against the view.
+    pub psnr: f64,
+}
+
+/// What a step's read-back slot holds besides the renderer's status words.
+#[derive(Debug)]
+struct InFlight {
+    iteration: u32,
+    view: usize,
+    num_gaussians: u32,
+    sh_degree: u32,
+    /// The loss whose partial sums follow the status, on logging iterations.
+    loss: Option<LossOutput>,
 }
 
 /// Seconds one iteration spent in each phase. Profiling waits for the GPU after every phase,
@@ -77,6 +106,17 @@ impl Stopwatch {
         }
     }
 
+    /// Seconds since the previous lap, after the GPU finished what `rec` recorded (submitted
+    /// here and replaced by a fresh recorder: profiling costs one submission per phase).
+    fn lap_recorded<'c>(&mut self, rec: &mut Recorder<'c>) -> Result<f64, TrainError> {
+        if !self.enabled {
+            return Ok(0.0);
+        }
+        let ctx = rec.ctx();
+        std::mem::replace(rec, ctx.recorder()).submit();
+        self.lap(ctx)
+    }
+
     /// Seconds since the previous lap, after the GPU finished what was submitted.
     fn lap(&mut self, ctx: &GpuContext) -> Result<f64, TrainError> {
         if !self.enabled {
@@ -92,12 +132,6 @@ impl Stopwatch {
     fn result(&self) -> Option<PhaseTimes> {
         self.enabled.then_some(self.times)
     }
-}
-
-/// What `optimise` reads back on logging iterations.
-struct Readings {
-    loss: Option<f64>,
-    psnr: Option<f64>,
 }
 
 /// Adam state of each parameter group.
@@ -131,13 +165,23 @@ pub struct Trainer<'c> {
     renderer: Renderer,
     loss: ImageLoss,
     adam: Adam,
+    opacity_reset: Kernel,
     cameras: Vec<Camera>,
     /// Per view, rgba f32 laid out like `ForwardState::rgba` (alpha unused by the loss).
     targets: Vec<GpuBuffer>,
     /// The loss has no depth term; the backward still wants a (zero) depth gradient.
     v_depth: GpuBuffer,
-    /// `None` only after a step failed between taking and returning them (see `Poisoned`).
-    params: Option<ParamBuffers>,
+    /// The parameters and the current view's camera. `None` only after a step failed between
+    /// taking and returning it (see `Poisoned`).
+    batch: Option<Batch>,
+    /// Per-step scratch, grown when the Gaussian or intersection count outgrows it.
+    ws: Workspace,
+    /// Room for (tile, Gaussian) intersections in a step (see `capacity.rs`).
+    capacity: u32,
+    readback: Readback<InFlight>,
+    /// Views whose step overflowed the intersection buffers (the GPU skipped its update),
+    /// trained again before new ones.
+    redo: VecDeque<usize>,
     moments: Moments,
     order: ViewOrder,
     /// Densification statistics and the split sampler.
@@ -198,24 +242,38 @@ impl<'c> Trainer<'c> {
                 ctx.storage_from("target", &rgba)
             })
             .collect();
-        Ok(Self {
+        let spec = ImageSpec {
+            camera: cameras[0],
+            background: config.background,
+            first: 0,
+            count: state.params.num_gaussians,
+        };
+        let batch = Batch::new(ctx, state.params, vec![spec])?;
+        let mut trainer = Self {
             ctx,
             renderer: Renderer::new(ctx),
             loss: ImageLoss::new(ctx),
             adam: Adam::new(ctx),
+            opacity_reset: density::opacity_reset_kernel(ctx),
             targets,
             v_depth: ctx.storage("v_depth", u64::from(w * h) * 4),
             moments: state.moments,
             stats: state.stats,
             rng: state.rng,
-            params: Some(state.params),
+            batch: Some(batch),
+            ws: Workspace::default(),
+            capacity: 0,
+            readback: Readback::new(IN_FLIGHT),
+            redo: VecDeque::new(),
             order: state.order,
             cameras,
             scene_scale,
             iteration: state.iteration,
             profiling: false,
             config,
-        })
+        };
+        trainer.capacity = trainer.measure_capacity()?;
+        Ok(trainer)
     }
 
     /// Time every phase of the following steps (`StepStats::phases`); costs a GPU wait per
@@ -243,25 +301,66 @@ impl<'c> Trainer<'c> {
     }
 
     pub fn sh_degree(&self) -> u32 {
-        self.params.as_ref().map_or(0, |p| p.sh_degree)
+        self.batch.as_ref().map_or(0, |b| b.params.sh_degree)
     }
 
     pub fn num_gaussians(&self) -> u32 {
-        self.params.as_ref().map_or(0, |p| p.num_gaussians)
+        self.batch.as_ref().map_or(0, |b| b.params.num_gaussians)
     }
 
-    /// One iteration: raise the SH degree if due, pick the next view, optimise on it.
+    /// The parameters (`Poisoned` if a failed step lost them).
+    fn params(&self) -> Result<&ParamBuffers, TrainError> {
+        self.batch
+            .as_ref()
+            .map(|b| &b.params)
+            .ok_or(TrainError::Poisoned)
+    }
+
+    fn params_mut(&mut self) -> Result<&mut ParamBuffers, TrainError> {
+        self.batch
+            .as_mut()
+            .map(|b| &mut b.params)
+            .ok_or(TrainError::Poisoned)
+    }
+
+    /// Room for (tile, Gaussian) intersections a step records with.
+    pub fn intersection_capacity(&self) -> u32 {
+        self.capacity
+    }
+
+    /// Overrides that room (tests force an overflow with it); it grows again on its own, as
+    /// soon as counts of earlier steps come back.
+    pub fn set_intersection_capacity(&mut self, capacity: u32) {
+        self.capacity = capacity;
+    }
+
+    /// Waits for every step in flight and returns the readings not yet reported (call at the
+    /// end of a run, or before reading results that must include them).
+    pub fn finish(&mut self) -> Result<Vec<Reading>, TrainError> {
+        let done = self.readback.drain(self.ctx)?;
+        self.absorb(done)
+    }
+
+    /// One iteration: raise the SH degree if due, pick the next view, optimise on it. Records
+    /// one submission and waits for nothing but a step `IN_FLIGHT` iterations old, except on
+    /// densification and SH-growth iterations (still decided on the CPU).
     pub fn step(&mut self) -> Result<StepStats, TrainError> {
         let it = self.iteration + 1;
         let mut watch = Stopwatch::new(self.profiling);
+        let mut done = self.readback.collect(self.ctx)?;
+        done.extend(self.readback.throttle(self.ctx)?);
+        let readings = self.absorb(done)?;
         let degree = self.config.sh_degree_at(it);
         if degree > self.sh_degree() {
             self.raise_sh_degree(degree)?;
         }
-        let view = self
-            .order
-            .next_view()
-            .ok_or_else(|| TrainError::Invalid("no training views".into()))?;
+        let view = match self.redo.pop_front() {
+            Some(v) => v,
+            None => self
+                .order
+                .next_view()
+                .ok_or_else(|| TrainError::Invalid("no training views".into()))?,
+        };
         let d = self.config.densify.clone();
         let plan = Plan {
             gather_stats: d.as_ref().is_some_and(|d| it < d.until_iter),
@@ -269,12 +368,22 @@ impl<'c> Trainer<'c> {
             reset_opacity: d.as_ref().is_some_and(|d| d.resets_opacity_at(it)),
         };
         let background = self.background_at(it);
-        let batch = self.batch_for(self.cameras[view], background)?;
-        let result = self.optimise(&batch, view, it, plan, &mut watch);
-        self.params = Some(batch.params);
-        let readings = result?;
+        let mut batch = self.batch.take().ok_or(TrainError::Poisoned)?;
+        let result = self
+            .aim(&mut batch, self.cameras[view], background)
+            .and_then(|()| {
+                let mut rec = self.ctx.recorder();
+                self.optimise(&mut rec, &batch, view, it, plan, &mut watch)?;
+                rec.submit();
+                self.readback.start();
+                Ok(())
+            });
+        self.batch = Some(batch);
+        result?;
         if let Some(d) = d.filter(|_| plan.densify) {
+            let before = self.num_gaussians();
             self.densify_and_prune(&d, it)?;
+            self.grow_capacity_with(before);
         }
         if plan.reset_opacity {
             self.reset_opacity()?;
@@ -286,10 +395,53 @@ impl<'c> Trainer<'c> {
             view,
             sh_degree: self.sh_degree(),
             num_gaussians: self.num_gaussians(),
-            loss: readings.loss,
-            psnr: readings.psnr,
+            readings,
             phases: watch.result(),
         })
+    }
+
+    /// Points the single-image batch at `camera` over `background`, all Gaussians.
+    fn aim(
+        &self,
+        batch: &mut Batch,
+        camera: Camera,
+        background: [f32; 3],
+    ) -> Result<(), TrainError> {
+        let spec = ImageSpec {
+            camera,
+            background,
+            first: 0,
+            count: batch.params.num_gaussians,
+        };
+        Ok(batch.set_images(self.ctx, vec![spec])?)
+    }
+
+    /// Turns finished read-backs into readings; an overflowed step grows the intersection
+    /// room and queues its view again.
+    fn absorb(&mut self, done: Vec<(InFlight, Vec<u8>)>) -> Result<Vec<Reading>, TrainError> {
+        let mut readings = Vec::new();
+        for (step, bytes) in done {
+            let word =
+                |i: usize| u32::from_le_bytes(bytes[4 * i..4 * i + 4].try_into().unwrap_or([0; 4]));
+            let (overflowed, needed) = (word(0) != 0, word(1));
+            self.note_intersections(needed);
+            if overflowed {
+                self.redo.push_back(step.view);
+                continue;
+            }
+            if let Some(loss) = step.loss {
+                let value = loss.value_from(&bytes[8..]);
+                readings.push(Reading {
+                    iteration: step.iteration,
+                    view: step.view,
+                    num_gaussians: step.num_gaussians,
+                    sh_degree: step.sh_degree,
+                    loss: value.loss,
+                    psnr: value.psnr,
+                });
+            }
+        }
+        Ok(readings)
     }
 
     /// The fixed background, or with `random_background` a colour drawn per iteration from
@@ -304,12 +456,14 @@ impl<'c> Trainer<'c> {
 
     /// Renders the current Gaussians from `camera` over the configured background.
     pub fn render(&mut self, camera: &Camera) -> Result<RenderedImage, TrainError> {
-        let batch = self.batch_for(*camera, self.config.background)?;
+        let mut batch = self.batch.take().ok_or(TrainError::Poisoned)?;
         let result = self
-            .renderer
-            .forward(self.ctx, &batch)
-            .and_then(|state| state.read_images(self.ctx, &batch));
-        self.params = Some(batch.params);
+            .aim(&mut batch, *camera, self.config.background)
+            .and_then(|()| {
+                let state = self.renderer.forward(self.ctx, &batch)?;
+                Ok(state.read_images(self.ctx, &batch)?)
+            });
+        self.batch = Some(batch);
         let mut images = result?;
         images
             .pop()
@@ -318,7 +472,7 @@ impl<'c> Trainer<'c> {
 
     /// Reads the current Gaussians back to the CPU (one sync per parameter buffer).
     pub fn gaussians(&self) -> Result<GaussianParams, TrainError> {
-        let p = self.params.as_ref().ok_or(TrainError::Poisoned)?;
+        let p = self.params()?;
         // The gradient readback reads any buffers shaped like the parameters.
         let g = p.read_grads(self.ctx, 0, p.num_gaussians)?;
         Ok(GaussianParams {
@@ -331,69 +485,55 @@ impl<'c> Trainer<'c> {
         })
     }
 
-    /// A single-image batch over the parameters. `Batch::new` takes them by value, so they
-    /// leave `self` until the caller puts `batch.params` back.
-    fn batch_for(&mut self, camera: Camera, background: [f32; 3]) -> Result<Batch, TrainError> {
-        let params = self.params.take().ok_or(TrainError::Poisoned)?;
-        let spec = ImageSpec {
-            camera,
-            background,
-            first: 0,
-            count: params.num_gaussians,
-        };
-        Ok(Batch::new(self.ctx, params, vec![spec])?)
-    }
-
+    /// Records forward, loss, backward, statistics and Adam for `view` into `rec`, and the
+    /// step's read-back (status words, plus the loss partials on logging iterations).
     fn optimise(
-        &self,
+        &mut self,
+        rec: &mut Recorder<'c>,
         batch: &Batch,
         view: usize,
         it: u32,
         plan: Plan,
         watch: &mut Stopwatch,
-    ) -> Result<Readings, TrainError> {
-        let ctx = self.ctx;
+    ) -> Result<(), TrainError> {
         let c = &self.config;
-        let state = self.renderer.forward(ctx, batch)?;
+        let ws = &mut self.ws;
+        let state = self.renderer.encode_forward(rec, ws, batch, self.capacity);
         let (w, h) = (batch.width(), batch.height());
-        let out = self.loss.compute(
-            ctx,
-            &state.rgba,
-            &self.targets[view],
-            w,
-            h,
-            1,
-            c.lambda_dssim,
-        );
-        let readings = if c.loss_every > 0 && it.is_multiple_of(c.loss_every) {
-            Readings {
-                loss: Some(out.read_loss(ctx)?),
-                psnr: Some(self.psnr(&state.rgba, view, (w * h) as usize)?),
-            }
-        } else {
-            Readings {
-                loss: None,
-                psnr: None,
-            }
-        };
-        watch.times.forward += watch.lap(ctx)?;
-        let grads = self
-            .renderer
-            .backward(ctx, batch, &state, &out.v_pred, &self.v_depth);
-        watch.times.backward += watch.lap(ctx)?;
+        let target = &self.targets[view];
+        let out = self
+            .loss
+            .compute(rec, ws, &state.rgba, target, w, h, 1, c.lambda_dssim);
+        watch.times.forward += watch.lap_recorded(rec)?;
+        let grads =
+            self.renderer
+                .encode_backward(rec, ws, batch, &state, &out.v_pred, &self.v_depth);
+        watch.times.backward += watch.lap_recorded(rec)?;
         if plan.gather_stats {
-            self.stats.accumulate(ctx, &state, &grads, w, h);
+            self.stats.accumulate(rec, &state, &grads, w, h);
         }
-        watch.times.density += watch.lap(ctx)?;
+        watch.times.density += watch.lap_recorded(rec)?;
+        let logged = c.loss_every > 0 && it.is_multiple_of(c.loss_every);
+        let mut ranges = vec![(&state.status.buffer, 0, 8)];
+        if logged {
+            ranges.push((&out.partials.buffer, 0, out.partials_bytes()));
+        }
+        let tag = InFlight {
+            iteration: it,
+            view,
+            num_gaussians: batch.params.num_gaussians,
+            sh_degree: batch.params.sh_degree,
+            loss: logged.then(|| out.clone()),
+        };
+        self.readback.record(rec, &ranges, tag)?;
         // INRIA densifies before `optimizer.step()`, and the parameters it replaces have no
         // gradient, so torch skips them: no step at all when densifying, and none for the
         // opacities when resetting them.
         if plan.densify {
-            return Ok(readings);
+            return Ok(());
         }
         let (p, g, m) = (&batch.params, &grads.params, &self.moments);
         let lr = AdamConfig::with_lr;
-        let mut enc = ctx.device.create_command_encoder(&Default::default());
         let groups = [
             (
                 &p.means,
@@ -410,35 +550,20 @@ impl<'c> Trainer<'c> {
                 c.opacity_lr,
             ),
         ];
-        let skip = if plan.reset_opacity { 3 } else { groups.len() };
+        let skip = Some(&state.status.buffer);
+        let reset_skips = if plan.reset_opacity { 3 } else { groups.len() };
         for (k, (param, grad, moments, rate)) in groups.into_iter().enumerate() {
-            if k == skip {
+            if k == reset_skips {
                 continue;
             }
             self.adam
-                .encode(ctx, &mut enc, param, grad, moments, &lr(rate), it);
+                .encode(rec, param, grad, moments, &lr(rate), it, skip);
         }
         let coeffs = sh_coeffs_per_channel(p.sh_degree) as u32;
         let sh_lr = lr(c.feature_lr).interleaved(coeffs, c.feature_rest_lr());
-        self.adam
-            .encode(ctx, &mut enc, &p.sh, &g.sh, &m.sh, &sh_lr, it);
-        ctx.queue.submit([enc.finish()]);
-        watch.times.optimizer += watch.lap(ctx)?;
-        Ok(readings)
-    }
-
-    /// PSNR of the rendered `rgba` against view `view`'s target over `pixels` pixels.
-    fn psnr(&self, rgba: &wgpu::Buffer, view: usize, pixels: usize) -> Result<f64, TrainError> {
-        let pred: Vec<[f32; 4]> = self.ctx.read(rgba, pixels)?;
-        let target: Vec<[f32; 4]> = self.ctx.read(&self.targets[view], pixels)?;
-        let sum: f64 = pred
-            .iter()
-            .zip(&target)
-            .flat_map(|(p, t)| (0..3).map(move |c| f64::from(p[c].clamp(0.0, 1.0) - t[c])))
-            .map(|d| d * d)
-            .sum();
-        let mse = sum / (3 * pixels).max(1) as f64;
-        Ok(10.0 * (1.0 / mse.max(1e-20)).log10())
+        self.adam.encode(rec, &p.sh, &g.sh, &m.sh, &sh_lr, it, skip);
+        watch.times.optimizer += watch.lap_recorded(rec)?;
+        Ok(())
     }
 
     /// Re-lays the SH buffer and its Adam moments out for `degree`, new coefficients zero.
@@ -446,7 +571,11 @@ impl<'c> Trainer<'c> {
     /// coefficients get zero gradients, so their parameters and moments stay zero until used.
     fn raise_sh_degree(&mut self, degree: u32) -> Result<(), TrainError> {
         let ctx = self.ctx;
-        let params = self.params.as_mut().ok_or(TrainError::Poisoned)?;
+        let params = self
+            .batch
+            .as_mut()
+            .map(|b| &mut b.params)
+            .ok_or(TrainError::Poisoned)?;
         let n = params.num_gaussians as usize;
         let (old_k, new_k) = (
             sh_coeffs_per_channel(params.sh_degree),
@@ -470,7 +599,7 @@ impl<'c> Trainer<'c> {
 }
 
 /// The optimisation state a trainer starts from: fresh in `new`, a checkpoint in `resume`.
-struct Resumed {
+pub(super) struct Resumed {
     params: ParamBuffers,
     moments: Moments,
     stats: GradStats,

@@ -4,7 +4,7 @@
 
 mod common;
 
-use cocog_engine::{Batch, ImageLoss, Renderer, View};
+use cocog_engine::{Batch, ImageLoss, Renderer, View, Workspace};
 use cocog_train::{DensifyConfig, GradStats, SplitMix64, TrainConfig, Trainer};
 use common::*;
 
@@ -32,10 +32,30 @@ fn gradient_statistics_match_a_cpu_model() {
         let rgba: Vec<[f32; 4]> = view.image.iter().map(|c| [c[0], c[1], c[2], 1.0]).collect();
         let target = ctx.storage_from("target", &rgba);
         let state = renderer.forward(ctx, &batch).unwrap();
-        let out = loss.compute(ctx, &state.rgba, &target, W, H, 1, 0.2);
+        let mut rec = ctx.recorder();
+        let out = loss.compute(
+            &mut rec,
+            &mut Workspace::default(),
+            &state.rgba,
+            &target,
+            W,
+            H,
+            1,
+            0.2,
+        );
+        rec.submit();
         let v_depth = ctx.storage("v_depth", u64::from(W * H) * 4);
         let grads = renderer.backward(ctx, &batch, &state, &out.v_pred, &v_depth);
-        stats.accumulate(ctx, &state, &grads, W, H);
+        let mut rec = ctx.recorder();
+        stats.accumulate(&mut rec, &state, &grads, W, H);
+        rec.submit();
+        // A pass flagged as overflowed (a skipped step) must add nothing. The write lands
+        // before the next submission, after the one above.
+        ctx.queue
+            .write_buffer(&state.status, 0, bytemuck::cast_slice(&[1u32, 0]));
+        let mut skipped = ctx.recorder();
+        stats.accumulate(&mut skipped, &state, &grads, W, H);
+        skipped.submit();
         // The CPU model: visible ⇔ radius > 0; norm of the pixel gradient scaled to NDC.
         let projected: Vec<f32> = ctx.read(&state.projected, 12 * n).unwrap();
         let v_proj: Vec<f32> = ctx.read(&grads.v_projected, 10 * n).unwrap();

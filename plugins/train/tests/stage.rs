@@ -78,7 +78,11 @@ fn train_stage_writes_gaussians_log_and_scene() {
         .lines()
         .map(|l| serde_json::from_str(l).unwrap())
         .collect();
-    // The last line sums the run up, collapse detection included.
+    // The first line says what the run starts from; the last sums it up, collapse
+    // detection included.
+    let start = lines.remove(0);
+    assert_eq!(start["start"]["iteration"], 0, "{start}");
+    assert_eq!(start["start"]["iterations"], 150, "{start}");
     let end = lines.pop().unwrap();
     assert_eq!(end["summary"]["iterations"], 150, "{end}");
     assert!(end["summary"].get("last_psnr_drop").is_some(), "{end}");
@@ -250,4 +254,112 @@ fn an_interrupted_run_leaves_a_checkpoint_that_resumes_to_the_end() {
         let err = run(train.as_ref(), &scene_dir, &tmp.path().join("x"), o).unwrap_err();
         assert!(err.to_string().contains(expect), "{err}");
     }
+}
+
+/// Records every log line and progress report, like a terminal would show them.
+#[derive(Default)]
+struct Recorder(std::sync::Mutex<Vec<String>>);
+
+impl cocog_pipeline::Context for Recorder {
+    fn log(&self, _: cocog_pipeline::LogLevel, message: &str) {
+        self.0.lock().unwrap().push(message.to_owned());
+    }
+
+    fn progress(&self, task: &str, done: u64, _: u64) {
+        self.0
+            .lock()
+            .unwrap()
+            .push(format!("progress {task} {done}"));
+    }
+
+    fn cancelled(&self) -> bool {
+        false
+    }
+}
+
+#[test]
+fn the_live_log_is_told_and_the_test_views_are_scored_into_it() {
+    if !gpu_available() {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let scene_dir = ingested(tmp.path());
+    let train = stage(cocog_train::stages(), "train");
+    let live = tmp.path().join("run.train-log.jsonl");
+    let given = json!({
+        "iterations": 50, "eval_every": 20, "seed": 4,
+        "live_log": live.display().to_string(),
+    });
+    let opts = Options::validate("train", &train.info().options, given.as_object().unwrap());
+    let out = tmp.path().join("staging");
+    std::fs::create_dir_all(&out).unwrap();
+    let req = StageRequest {
+        input: scene_dir.clone(),
+        output: out.clone(),
+        options: opts.unwrap(),
+    };
+    let ctx = Recorder::default();
+    let summary = train.run(&req, &ctx).unwrap();
+    let said = ctx.0.into_inner().unwrap();
+    assert!(
+        said.iter()
+            .any(|l| l.contains("training log") && l.contains(&*live.to_string_lossy())),
+        "{said:?}"
+    );
+    // Progress comes every step, so a host can pace its lines by time.
+    let steps = said
+        .iter()
+        .filter(|l| l.starts_with("progress train "))
+        .count();
+    assert_eq!(steps, 50, "{said:?}");
+
+    // The live log was written beside the output and copied into it whole.
+    let log = std::fs::read_to_string(&live).unwrap();
+    assert_eq!(
+        log,
+        std::fs::read_to_string(out.join("train-log.jsonl")).unwrap()
+    );
+    let records: Vec<Value> = log
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let evals: Vec<&Value> = records.iter().filter_map(|r| r.get("eval")).collect();
+    let at: Vec<u64> = evals
+        .iter()
+        .map(|e| e["iteration"].as_u64().unwrap())
+        .collect();
+    assert_eq!(at, [20, 40, 50], "every 20 iterations and at the end");
+    for e in &evals {
+        assert_eq!(e["split"], "test");
+        assert!(e["views"].as_u64().unwrap() > 0, "{e}");
+        let (psnr, ssim) = (e["psnr"].as_f64().unwrap(), e["ssim"].as_f64().unwrap());
+        assert!(psnr.is_finite() && psnr > 5.0, "{e}");
+        assert!((-1.0..=1.0).contains(&ssim), "{e}");
+    }
+    // serde_json's default float parser may be 1 ulp off, so compare with a tolerance.
+    let last = evals[2]["psnr"].as_f64().unwrap();
+    let summed = records.last().unwrap()["summary"]["test_psnr"].as_f64();
+    for v in [summary["test_psnr"].as_f64(), summed] {
+        assert!((v.unwrap() - last).abs() < 1e-9, "{v:?} vs {last}");
+    }
+    assert!(
+        said.iter()
+            .any(|l| l.starts_with("iteration 40: test views PSNR")),
+        "{said:?}"
+    );
+
+    // A scene without test views cannot be scored: said before training starts.
+    let mut scene = Scene::load(&scene_dir).unwrap();
+    for v in &mut scene.views {
+        v.split = cocog_pipeline::Split::Train;
+    }
+    scene.save(&scene_dir).unwrap();
+    let err = run(
+        train.as_ref(),
+        &scene_dir,
+        &tmp.path().join("none"),
+        json!({"iterations": 10, "eval_every": 5}),
+    )
+    .unwrap_err();
+    assert!(err.to_string().contains("no test views"), "{err}");
 }

@@ -1,4 +1,4 @@
-//! Scene → trainer inputs: the initial Gaussians from `points.ply` and the train-split views.
+//! Scene → trainer inputs: the initial Gaussians from `points.ply` and the views of a split.
 
 use std::path::Path;
 
@@ -36,10 +36,11 @@ pub fn initial_gaussians(scene: &Scene, input: &Path) -> Result<GaussianParams, 
         .map_err(|e| StageError::Input(format!("{}: {e}", path.display())))
 }
 
-/// `train_views` with its scratch folder inside the output, removed before returning.
-pub fn train_views_scratch(
+/// `split_views` with its scratch folder inside the output, removed before returning.
+pub fn views_scratch(
     scene: &Scene,
     req: &StageRequest,
+    split: Split,
     downscale: u32,
     config: &TrainConfig,
     ctx: &dyn Context,
@@ -48,9 +49,10 @@ pub fn train_views_scratch(
     if downscale > 1 {
         std::fs::create_dir_all(&scratch).map_err(|e| StageError::io(&scratch, e))?;
     }
-    let views = train_views(
+    let views = split_views(
         scene,
         &req.input,
+        split,
         downscale,
         config.background,
         &scratch,
@@ -62,23 +64,28 @@ pub fn train_views_scratch(
     views
 }
 
-/// Loads every train-split view, shrunk by `downscale` with intrinsics scaled to match.
+/// Loads every view of `split`, shrunk by `downscale` with intrinsics scaled to match.
 /// `scratch` holds the downscaled PNGs (formats' area filter only writes files); the caller
 /// removes it.
-pub fn train_views(
+pub fn split_views(
     scene: &Scene,
     input: &Path,
+    split: Split,
     downscale: u32,
     background: [f32; 3],
     scratch: &Path,
     ctx: &dyn Context,
 ) -> Result<Vec<TrainView>, StageError> {
-    let views = cocog_render::split_cameras(scene, input, Some(Split::Train), downscale)?;
+    let views = cocog_render::split_cameras(scene, input, Some(split), downscale)?;
     let total = views.len() as u64;
+    let task = match split {
+        Split::Train => "load images",
+        Split::Test => "load test images",
+    };
     let mut out = Vec::with_capacity(views.len());
     for (i, view) in views.iter().enumerate() {
         ctx.check_cancelled()?;
-        ctx.progress("load images", i as u64, total);
+        ctx.progress(task, i as u64, total);
         let (w, h) = (view.camera.width, view.camera.height);
         let src = &view.image;
         let path = if downscale > 1 {
@@ -109,6 +116,6 @@ pub fn train_views(
                 .collect(),
         });
     }
-    ctx.progress("load images", total, total);
+    ctx.progress(task, total, total);
     Ok(out)
 }

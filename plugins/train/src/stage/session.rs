@@ -1,16 +1,17 @@
-//! The stage's training loop: steps, the log, progress, and checkpoints that survive Ctrl-C.
+//! The stage's training loop: steps, the log, progress, test scores, and checkpoints that
+//! survive Ctrl-C.
 
-use std::fs::File;
-use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use cocog_pipeline::atomic::Staging;
 use cocog_pipeline::{Context, StageError};
-use serde_json::json;
+use serde_json::{Value, json};
 
 use super::Plan;
-use crate::{DROP_DB, DropWatch, PsnrDrop, Trainer};
+use super::log::TrainLog;
+use super::test_eval::{Scores, TestViews};
+use crate::{DROP_DB, DropWatch, PsnrDrop, Reading, Trainer};
 
 /// A run in progress and where its side products go.
 pub(super) struct Session<'c> {
@@ -20,8 +21,9 @@ pub(super) struct Session<'c> {
     views: usize,
     checkpoint_dir: Option<PathBuf>,
     checkpoint_every: u32,
-    log_path: PathBuf,
-    log: BufWriter<File>,
+    log: TrainLog,
+    test: Option<TestViews>,
+    eval_every: u32,
 }
 
 /// How the loop ended.
@@ -32,12 +34,30 @@ pub(super) struct Outcome {
     pub it_per_s: f64,
     /// The most recent fall of the smoothed training PSNR by more than `DROP_DB` (a collapse).
     pub last_drop: Option<PsnrDrop>,
+    /// The test views' scores at the end, with `eval_every`.
+    pub test: Option<Scores>,
 }
 
 impl<'c> Session<'c> {
-    pub fn new(trainer: Trainer<'c>, plan: &Plan, output: &Path) -> Result<Self, StageError> {
-        let log_path = output.join("train-log.jsonl");
-        let file = File::create(&log_path).map_err(|e| StageError::io(&log_path, e))?;
+    /// Opens the log (telling the user where it is when it is kept beside the output) and
+    /// writes `start`, the run's first record.
+    pub fn new(
+        trainer: Trainer<'c>,
+        plan: &Plan,
+        output: &Path,
+        test: Option<TestViews>,
+        start: &Value,
+        ctx: &dyn Context,
+    ) -> Result<Self, StageError> {
+        let mut log = TrainLog::open(plan.live_log.as_deref(), plan.resume.as_deref(), output)?;
+        if plan.live_log.is_some() {
+            ctx.info(&format!(
+                "training log: {} (follow it with tail -f; it goes into the output as \
+                 train-log.jsonl when training succeeds)",
+                log.path().display()
+            ));
+        }
+        log.record(&json!({ "start": start }))?;
         Ok(Self {
             views: trainer.num_views(),
             trainer,
@@ -45,9 +65,68 @@ impl<'c> Session<'c> {
             iterations: plan.config.iterations,
             checkpoint_dir: plan.checkpoint_dir.clone(),
             checkpoint_every: plan.checkpoint_every,
-            log_path,
-            log: BufWriter::new(file),
+            log,
+            test,
+            eval_every: plan.eval_every,
         })
+    }
+
+    /// Scores the test views if one is due after iteration `it` (every `eval_every` and at
+    /// the end); returns the seconds it took, which are not training time.
+    fn maybe_eval(
+        &mut self,
+        it: u32,
+        last: &mut Option<Scores>,
+        ctx: &dyn Context,
+    ) -> Result<f64, StageError> {
+        let due =
+            self.eval_every > 0 && (it.is_multiple_of(self.eval_every) || it == self.iterations);
+        let Some(test) = self.test.as_ref().filter(|_| due) else {
+            return Ok(0.0);
+        };
+        let scores = test.score(&mut self.trainer)?;
+        self.log.record(&scores.record())?;
+        ctx.info(&scores.line());
+        let seconds = scores.seconds;
+        *last = Some(scores);
+        Ok(seconds)
+    }
+
+    /// Logs one reading, watches it for a collapse, and prints every fifth.
+    /// `clock` is (run start, first iteration, seconds spent scoring test views).
+    fn report(
+        &mut self,
+        r: &Reading,
+        clock: (Instant, u32, f64),
+        watch: &mut DropWatch,
+        ctx: &dyn Context,
+    ) -> Result<(), StageError> {
+        let (start, first, eval_seconds) = clock;
+        let (it, total) = (r.iteration, self.iterations);
+        let elapsed = start.elapsed().as_secs_f64();
+        let rate = f64::from(it - first + 1) / (elapsed - eval_seconds).max(1e-9);
+        let line = json!({
+            "iteration": it,
+            "loss": r.loss,
+            "psnr": r.psnr,
+            "gaussians": r.num_gaussians,
+            "sh_degree": r.sh_degree,
+            "elapsed_s": elapsed,
+            "it_per_s": rate,
+        });
+        self.log.record(&line)?;
+        if let Some(drop) = watch.observe(it, r.psnr) {
+            ctx.warn(&drop_message(&drop));
+        }
+        // Every reading goes to the log file; every fifth to the terminal.
+        let every = 5 * self.trainer.config().loss_every.max(1);
+        if it % every == 0 || it == total {
+            ctx.info(&format!(
+                "iteration {it}/{total}: loss {:.5}, PSNR {:.2} dB, {} Gaussians, {rate:.1} it/s",
+                r.loss, r.psnr, r.num_gaussians
+            ));
+        }
+        Ok(())
     }
 
     pub fn run(&mut self, ctx: &dyn Context) -> Result<Outcome, StageError> {
@@ -55,6 +134,9 @@ impl<'c> Session<'c> {
         let total = self.iterations;
         let start = Instant::now();
         let mut last = (None, None);
+        let mut last_test = None;
+        // Scoring the test views is not training: it/s leaves it out.
+        let mut eval_seconds = 0.0;
         let mut watch = DropWatch::new(self.views);
         for it in first..=total {
             if ctx.cancelled() {
@@ -62,53 +144,32 @@ impl<'c> Session<'c> {
                 return Err(StageError::Cancelled);
             }
             let stats = self.trainer.step().map_err(StageError::other)?;
-            if it % 10 == 0 || it == total || it == first {
-                ctx.progress("train", u64::from(it), u64::from(total));
+            // Every step: the host decides how often to draw or print (by time, not count).
+            ctx.progress("train", u64::from(it), u64::from(total));
+            let clock = (start, first, eval_seconds);
+            for r in stats.readings {
+                last = (Some(r.loss), Some(r.psnr));
+                self.report(&r, clock, &mut watch, ctx)?;
             }
-            if let (Some(loss), psnr) = (stats.loss, stats.psnr) {
-                last = (Some(loss), psnr);
-                let elapsed = start.elapsed().as_secs_f64();
-                let rate = f64::from(it - first + 1) / elapsed.max(1e-9);
-                let line = json!({
-                    "iteration": it,
-                    "loss": loss,
-                    "psnr": psnr,
-                    "gaussians": stats.num_gaussians,
-                    "sh_degree": stats.sh_degree,
-                    "elapsed_s": elapsed,
-                    "it_per_s": rate,
-                });
-                // Flushed line by line: `tail -f` shows progress, and a killed run's log
-                // still says how far it got.
-                writeln!(self.log, "{line}")
-                    .and_then(|()| self.log.flush())
-                    .map_err(|e| StageError::io(&self.log_path, e))?;
-                if let Some(drop) = psnr.and_then(|p| watch.observe(it, p)) {
-                    ctx.warn(&drop_message(&drop));
-                }
-                // Every reading goes to the log file; every fifth to the terminal.
-                let every = 5 * self.trainer.config().loss_every.max(1);
-                if it % every == 0 || it == total {
-                    ctx.info(&format!(
-                        "iteration {it}/{total}: loss {loss:.5}, PSNR {:.2} dB, {} Gaussians, \
-                     {rate:.1} it/s",
-                        psnr.unwrap_or(f64::NAN),
-                        stats.num_gaussians
-                    ));
-                }
-            }
+            eval_seconds += self.maybe_eval(it, &mut last_test, ctx)?;
             let due = self.checkpoint_every > 0 && it % self.checkpoint_every == 0 && it < total;
             if let Some(dir) = self.checkpoint_dir.clone().filter(|_| due) {
                 self.save(&dir)?;
             }
+        }
+        // The last steps' readings arrive once the GPU has finished them.
+        for r in self.trainer.finish().map_err(StageError::other)? {
+            last = (Some(r.loss), Some(r.psnr));
+            self.report(&r, (start, first, eval_seconds), &mut watch, ctx)?;
         }
         let seconds = start.elapsed().as_secs_f64();
         let outcome = Outcome {
             final_loss: last.0,
             final_psnr: last.1,
             seconds,
-            it_per_s: f64::from(total - first + 1) / seconds.max(1e-9),
+            it_per_s: f64::from(total - first + 1) / (seconds - eval_seconds).max(1e-9),
             last_drop: watch.last(),
+            test: last_test,
         };
         let summary = json!({
             "summary": {
@@ -118,12 +179,11 @@ impl<'c> Session<'c> {
                 "seconds": seconds,
                 "it_per_s": outcome.it_per_s,
                 "last_psnr_drop": outcome.last_drop.map(|d| d.iteration),
+                "test_psnr": outcome.test.as_ref().map(|t| t.psnr),
+                "test_ssim": outcome.test.as_ref().and_then(|t| t.ssim),
             }
         });
-        writeln!(self.log, "{summary}").map_err(|e| StageError::io(&self.log_path, e))?;
-        self.log
-            .flush()
-            .map_err(|e| StageError::io(&self.log_path, e))?;
+        self.log.record(&summary)?;
         match &outcome.last_drop {
             Some(d) => ctx.warn(&format!(
                 "training PSNR last fell more than {DROP_DB} dB at iteration {} ({:.2} dB, best \
@@ -151,6 +211,11 @@ impl<'c> Session<'c> {
             .map_err(|e| StageError::io(dir, e))
     }
 
+    /// The log into the output (see `TrainLog::finish`).
+    pub fn finish_log(&self, output: &Path) -> Result<(), StageError> {
+        self.log.finish(output)
+    }
+
     fn save_on_interrupt(&self, ctx: &dyn Context) -> Result<(), StageError> {
         let Some(dir) = &self.checkpoint_dir else {
             return Ok(());
@@ -159,11 +224,21 @@ impl<'c> Session<'c> {
             return Ok(());
         }
         self.save(dir)?;
+        // A log inside the output goes with the discarded staging folder; a live one stays.
+        let log = if self.log.is_live() {
+            format!(
+                ", which also continues the log {}",
+                self.log.path().display()
+            )
+        } else {
+            String::new()
+        };
         ctx.warn(&format!(
-            "interrupted after iteration {}; checkpoint saved to {} (continue with --resume {})",
+            "interrupted after iteration {}; checkpoint saved to {} (continue with --resume \
+             {}{log})",
             self.trainer.iteration(),
             dir.display(),
-            dir.display()
+            dir.display(),
         ));
         Ok(())
     }

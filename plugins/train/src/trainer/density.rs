@@ -1,7 +1,7 @@
 //! The trainer's side of adaptive density control: read back, decide on the CPU
 //! (`plan_densify`), re-upload parameters and Adam moments in the new order.
 
-use cocog_engine::{AdamMoments, GpuContext, ParamBuffers};
+use cocog_engine::{AdamMoments, GpuContext, Kernel, ParamBuffers, shader};
 
 use super::{Moments, Trainer};
 use crate::{
@@ -71,20 +71,45 @@ impl Trainer<'_> {
         let params = ParamBuffers::upload(ctx, &[&dense])?;
         self.stats.reset(ctx, params.num_gaussians);
         self.moments = moments;
-        self.params = Some(params);
+        *self.params_mut()? = params;
         Ok(plan)
     }
 
-    /// INRIA `reset_opacity`: opacity ≤ 0.01 everywhere, and fresh Adam moments for it.
+    /// INRIA `reset_opacity`: opacity ≤ 0.01 everywhere, and fresh Adam moments for it, on
+    /// the GPU (queued behind this iteration's step).
     pub(super) fn reset_opacity(&mut self) -> Result<(), TrainError> {
         let ctx = self.ctx;
-        let params = self.params.as_mut().ok_or(TrainError::Poisoned)?;
+        let params = self.params()?;
         let n = params.num_gaussians;
-        let logits: Vec<f32> = ctx.read(&params.opacity_logits, n as usize)?;
-        let cap = inverse_sigmoid(RESET_OPACITY);
-        let clamped: Vec<f32> = logits.iter().map(|&l| l.min(cap)).collect();
-        params.opacity_logits = ctx.storage_from("opacity_logits", &clamped);
-        self.moments.opacity_logits = AdamMoments::new(ctx, n);
+        let mut rec = ctx.recorder();
+        let cap = rec.uniform(&ResetParams {
+            n,
+            cap: inverse_sigmoid(RESET_OPACITY),
+            pad: [0; 2],
+        });
+        self.opacity_reset.dispatch_1d(
+            &mut rec,
+            &[(0, &cap), (1, &params.opacity_logits)],
+            n.div_ceil(256),
+        );
+        let m = &self.moments.opacity_logits;
+        rec.encoder().clear_buffer(&m.m, 0, None);
+        rec.encoder().clear_buffer(&m.v, 0, None);
+        rec.submit();
         Ok(())
     }
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct ResetParams {
+    n: u32,
+    cap: f32,
+    pad: [u32; 2],
+}
+
+/// The kernel `reset_opacity` runs.
+pub(super) fn opacity_reset_kernel(ctx: &GpuContext) -> Kernel {
+    let module = shader(ctx, "opacity_reset", include_str!("opacity_reset.wgsl"));
+    Kernel::new(ctx, &module, "reset_opacity")
 }

@@ -1,0 +1,195 @@
+//! Adapter selection and device creation.
+
+use std::sync::Arc;
+
+use super::buffers::MemoryTracker;
+use super::counters::Counters;
+use super::recorder::ArenaPool;
+use crate::EngineError;
+
+/// Storage buffers the widest kernel (projection backward) binds at once.
+pub(crate) const REQUIRED_STORAGE_BUFFERS: u32 = 12;
+/// The rasterizer stages one batch of 256 projected Gaussians (48 B each) in shared memory.
+pub(crate) const REQUIRED_WORKGROUP_STORAGE: u32 = 16 * 1024;
+
+/// A wgpu device plus what the engine learned about it.
+pub struct GpuContext {
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub adapter_info: wgpu::AdapterInfo,
+    /// Native `atomic<f32>` adds; without them gradients use a compare-exchange loop.
+    pub float_atomics: bool,
+    /// Subgroup reductions, which cut the backward's atomics by the subgroup width.
+    pub subgroups: bool,
+    pub memory: Arc<MemoryTracker>,
+    /// Buffers created, blocking reads, submissions, dispatches: see `Counters`.
+    pub counters: Counters,
+    pub(crate) arenas: ArenaPool,
+    /// The device's uniform offset alignment, read once (recorders pack every uniform by it).
+    pub(crate) uniform_align: u64,
+}
+
+impl std::fmt::Debug for GpuContext {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GpuContext")
+            .field("adapter", &self.adapter_name())
+            .field("float_atomics", &self.float_atomics)
+            .field("subgroups", &self.subgroups)
+            .finish()
+    }
+}
+
+fn rank(info: &wgpu::AdapterInfo) -> u32 {
+    match info.device_type {
+        wgpu::DeviceType::DiscreteGpu => 0,
+        wgpu::DeviceType::IntegratedGpu => 1,
+        wgpu::DeviceType::VirtualGpu => 2,
+        wgpu::DeviceType::Other => 3,
+        wgpu::DeviceType::Cpu => 4,
+    }
+}
+
+/// The GPU context GPU tests share, or `None` (reason printed) on a machine without an adapter.
+/// With `CI=true` a missing adapter panics instead: CI must never pass by skipping GPU tests.
+/// One context per test binary: creating devices is slow on software adapters.
+pub fn test_gpu() -> Option<&'static GpuContext> {
+    static CTX: std::sync::OnceLock<Option<GpuContext>> = std::sync::OnceLock::new();
+    CTX.get_or_init(|| match GpuContext::new() {
+        Ok(ctx) => {
+            eprintln!("GPU tests run on {}", ctx.adapter_name());
+            Some(ctx)
+        }
+        Err(e) => {
+            assert!(
+                std::env::var("CI").as_deref() != Ok("true"),
+                "CI=true but no usable GPU adapter: {e}"
+            );
+            eprintln!("skipping GPU test: {e}");
+            None
+        }
+    })
+    .as_ref()
+}
+
+impl GpuContext {
+    /// Picks an adapter: the one whose name contains `COCOG_ADAPTER` if that is set, else the
+    /// most capable kind (discrete > integrated > virtual > CPU such as lavapipe).
+    pub fn new() -> Result<Self, EngineError> {
+        let wanted = std::env::var("COCOG_ADAPTER")
+            .ok()
+            .filter(|s| !s.is_empty());
+        Self::with_adapter(wanted.as_deref())
+    }
+
+    /// Like `new`, with an explicit adapter-name substring (case-insensitive).
+    pub fn with_adapter(wanted: Option<&str>) -> Result<Self, EngineError> {
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let mut adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
+        let names = adapters
+            .iter()
+            .map(|a| {
+                let i = a.get_info();
+                format!("{} ({:?}, {:?})", i.name, i.backend, i.device_type)
+            })
+            .collect::<Vec<_>>()
+            .join(", ");
+        if let Some(w) = wanted {
+            let w = w.to_lowercase();
+            adapters.retain(|a| a.get_info().name.to_lowercase().contains(&w));
+            if adapters.is_empty() {
+                return Err(EngineError::AdapterNotFound {
+                    wanted: w,
+                    available: names,
+                });
+            }
+        }
+        adapters.retain(|a| {
+            a.get_downlevel_capabilities()
+                .flags
+                .contains(wgpu::DownlevelFlags::COMPUTE_SHADERS)
+        });
+        adapters.sort_by_key(|a| rank(&a.get_info()));
+        let adapter = adapters.into_iter().next().ok_or_else(|| {
+            EngineError::NoAdapter(format!("no compute-capable adapter among [{names}]"))
+        })?;
+        Self::from_adapter(&adapter)
+    }
+
+    fn from_adapter(adapter: &wgpu::Adapter) -> Result<Self, EngineError> {
+        let info = adapter.get_info();
+        let limits = adapter.limits();
+        let missing = |what: &str| EngineError::MissingCapability {
+            adapter: info.name.clone(),
+            what: what.to_owned(),
+        };
+        if limits.max_storage_buffers_per_shader_stage < REQUIRED_STORAGE_BUFFERS {
+            return Err(missing(&format!(
+                "{REQUIRED_STORAGE_BUFFERS} storage buffers per stage"
+            )));
+        }
+        if limits.max_compute_workgroup_storage_size < REQUIRED_WORKGROUP_STORAGE {
+            return Err(missing(&format!(
+                "{REQUIRED_WORKGROUP_STORAGE} B workgroup storage"
+            )));
+        }
+        if limits.max_compute_invocations_per_workgroup < 256 {
+            return Err(missing("256 invocations per workgroup"));
+        }
+        let float_atomics = adapter
+            .features()
+            .contains(wgpu::Features::SHADER_FLOAT32_ATOMIC)
+            && std::env::var("COCOG_NO_FLOAT_ATOMICS").is_err();
+        let subgroups = adapter.features().contains(wgpu::Features::SUBGROUP)
+            && std::env::var("COCOG_NO_SUBGROUPS").is_err();
+        let mut required_features = wgpu::Features::empty();
+        if float_atomics {
+            required_features |= wgpu::Features::SHADER_FLOAT32_ATOMIC;
+        }
+        if subgroups {
+            required_features |= wgpu::Features::SUBGROUP;
+        }
+        // Ask for what the adapter has on buffer sizes: big scenes need big buffers, and
+        // asking costs nothing on adapters that have less.
+        let required_limits = wgpu::Limits {
+            max_storage_buffers_per_shader_stage: limits.max_storage_buffers_per_shader_stage,
+            max_storage_buffer_binding_size: limits.max_storage_buffer_binding_size,
+            max_buffer_size: limits.max_buffer_size,
+            max_compute_workgroup_storage_size: limits.max_compute_workgroup_storage_size,
+            ..wgpu::Limits::default()
+        };
+        let (device, queue) =
+            pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+                label: Some("cocog-engine"),
+                required_features,
+                required_limits,
+                ..Default::default()
+            }))?;
+        Ok(Self {
+            queue,
+            adapter_info: info,
+            float_atomics,
+            subgroups,
+            memory: Arc::default(),
+            counters: Counters::default(),
+            arenas: ArenaPool::default(),
+            uniform_align: u64::from(device.limits().min_uniform_buffer_offset_alignment),
+            device,
+        })
+    }
+
+    /// Blocks until all submitted GPU work has finished (for timing; the engine itself only
+    /// syncs when reading back).
+    pub fn wait(&self) -> Result<(), EngineError> {
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map(|_| ())
+            .map_err(|e| EngineError::Readback(e.to_string()))
+    }
+
+    /// "name (backend, device type)", for logs and benchmark reports.
+    pub fn adapter_name(&self) -> String {
+        let i = &self.adapter_info;
+        format!("{} ({:?}, {:?})", i.name, i.backend, i.device_type)
+    }
+}

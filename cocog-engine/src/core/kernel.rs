@@ -1,0 +1,125 @@
+//! Compute pipeline creation, cached bind groups and large-grid dispatch.
+
+use std::collections::HashMap;
+use std::sync::Mutex;
+
+use super::GpuContext;
+use super::recorder::{Bind, Recorder};
+
+/// Workgroups along x before a 1D grid spills into y (WebGPU's per-dimension limit).
+const MAX_GRID_X: u32 = 65_535;
+/// Bind groups one kernel keeps; a training step binds each kernel a handful of ways.
+const CACHE_ENTRIES: usize = 64;
+
+/// (binding, buffer, offset, size): what a bind group entry points at.
+type Key = Vec<(u32, wgpu::Buffer, u64, Option<u64>)>;
+
+#[derive(Debug, Default)]
+struct Cache {
+    /// `MemoryTracker::drops` when the entries were last known to hold no freed buffer.
+    generation: u64,
+    groups: HashMap<Key, wgpu::BindGroup>,
+}
+
+/// One compute entry point; stages with shaders of their own (train's statistics) use it too.
+#[derive(Debug)]
+pub struct Kernel {
+    pipeline: wgpu::ComputePipeline,
+    layout: wgpu::BindGroupLayout,
+    label: &'static str,
+    cache: Mutex<Cache>,
+}
+
+impl Kernel {
+    pub fn new(ctx: &GpuContext, module: &wgpu::ShaderModule, entry: &'static str) -> Self {
+        let pipeline = ctx
+            .device
+            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: None,
+                module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            });
+        Self {
+            layout: pipeline.get_bind_group_layout(0),
+            pipeline,
+            label: entry,
+            cache: Mutex::default(),
+        }
+    }
+
+    /// Binds `(binding, buffer)` pairs to group 0 and dispatches `workgroups` (a 1D count that
+    /// is folded into a 2D grid when too large; kernels rebuild the linear index).
+    pub fn dispatch_1d(&self, rec: &mut Recorder, bindings: &[(u32, &dyn Bind)], workgroups: u32) {
+        if workgroups == 0 {
+            return;
+        }
+        let x = workgroups.min(MAX_GRID_X);
+        self.dispatch(rec, bindings, [x, workgroups.div_ceil(x), 1]);
+    }
+
+    pub fn dispatch(&self, rec: &mut Recorder, bindings: &[(u32, &dyn Bind)], grid: [u32; 3]) {
+        if grid.contains(&0) {
+            return;
+        }
+        let ctx = rec.ctx();
+        let bind_group = self.bind_group(ctx, bindings);
+        ctx.counters.dispatch();
+        let mut pass = rec
+            .encoder()
+            .begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(self.label),
+                timestamp_writes: None,
+            });
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &bind_group, &[]);
+        pass.dispatch_workgroups(grid[0], grid[1], grid[2]);
+    }
+
+    /// The cached bind group for these bindings, or a new one. The cache is emptied whenever a
+    /// buffer was freed since it was filled, so it never keeps dead buffers' memory alive.
+    fn bind_group(&self, ctx: &GpuContext, bindings: &[(u32, &dyn Bind)]) -> wgpu::BindGroup {
+        let key: Key = bindings
+            .iter()
+            .map(|(slot, b)| {
+                let bb = b.binding();
+                (*slot, bb.buffer.clone(), bb.offset, bb.size.map(u64::from))
+            })
+            .collect();
+        let mut cache = self.cache.lock().unwrap_or_else(|e| e.into_inner());
+        let generation = ctx.memory.drops();
+        if cache.generation != generation || cache.groups.len() >= CACHE_ENTRIES {
+            cache.groups.clear();
+            cache.generation = generation;
+        }
+        if let Some(group) = cache.groups.get(&key) {
+            return group.clone();
+        }
+        let entries: Vec<_> = bindings
+            .iter()
+            .map(|(binding, b)| wgpu::BindGroupEntry {
+                binding: *binding,
+                resource: wgpu::BindingResource::Buffer(b.binding()),
+            })
+            .collect();
+        ctx.counters.bind_group_created();
+        let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(self.label),
+            layout: &self.layout,
+            entries: &entries,
+        });
+        cache.groups.insert(key, group.clone());
+        group
+    }
+}
+
+/// Compiles WGSL `source`.
+pub fn shader(ctx: &GpuContext, label: &str, source: &str) -> wgpu::ShaderModule {
+    ctx.device
+        .create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some(label),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        })
+}

@@ -1,0 +1,21 @@
+//! What every kernel stands on: the device, buffers with memory accounting, recorders that
+//! batch a step into one submission, cached dispatch, grow-only workspaces, asynchronous
+//! read-back, operation counters, and the headless-Vulkan quieting.
+
+mod buffers;
+mod context;
+mod counters;
+mod headless;
+mod kernel;
+mod readback;
+mod recorder;
+mod workspace;
+
+pub use buffers::{GpuBuffer, MemoryTracker};
+pub use context::{GpuContext, test_gpu};
+pub use counters::{CounterSnapshot, Counters};
+pub use headless::{device_select_probe_is_futile, quiet_headless_vulkan};
+pub use kernel::{Kernel, shader};
+pub use readback::Readback;
+pub use recorder::{Bind, Recorder, UniformSlot};
+pub use workspace::Workspace;

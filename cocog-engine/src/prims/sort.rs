@@ -1,0 +1,133 @@
+//! GPU stable radix sort of (u32 key, u32 value) pairs.
+
+use super::PrefixSum;
+use crate::core::{GpuBuffer, GpuContext};
+use crate::core::{Kernel, Recorder, Workspace, shader};
+
+const BLOCK: u32 = 1024;
+const BITS_PER_PASS: u32 = 4;
+/// `Params::count_at` when the host knows the count.
+const HOST_COUNT: u32 = u32::MAX;
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    n: u32,
+    shift: u32,
+    num_blocks: u32,
+    count_at: u32,
+}
+
+#[derive(Debug)]
+pub struct RadixSort {
+    count: Kernel,
+    scatter: Kernel,
+}
+
+/// Pairs to sort plus equally sized scratch; after a sort `keys`/`values` hold the result.
+#[derive(Clone, Debug)]
+pub struct SortBuffers {
+    pub keys: GpuBuffer,
+    pub values: GpuBuffer,
+    pub keys_tmp: GpuBuffer,
+    pub values_tmp: GpuBuffer,
+}
+
+impl SortBuffers {
+    /// Fresh scratch for `n` pairs around the given keys and values.
+    pub fn new(ctx: &GpuContext, keys: GpuBuffer, values: GpuBuffer, n: u32) -> Self {
+        Self {
+            keys,
+            values,
+            keys_tmp: ctx.storage("sort keys tmp", u64::from(n) * 4),
+            values_tmp: ctx.storage("sort values tmp", u64::from(n) * 4),
+        }
+    }
+}
+
+/// How many pairs to sort: known to the host, or at most `capacity` with the true count at
+/// element `index` of a GPU buffer (pairs past the count are left alone).
+#[derive(Clone, Copy, Debug)]
+pub enum SortCount<'a> {
+    Host(u32),
+    Gpu {
+        capacity: u32,
+        buffer: &'a wgpu::Buffer,
+        index: u32,
+    },
+}
+
+impl RadixSort {
+    pub fn new(ctx: &GpuContext) -> Self {
+        let module = shader(ctx, "radix", include_str!("radix.wgsl"));
+        Self {
+            count: Kernel::new(ctx, &module, "count_digits"),
+            scatter: Kernel::new(ctx, &module, "scatter"),
+        }
+    }
+
+    /// Records a stable sort of the pairs on the low `bits` key bits. Passes ping-pong through
+    /// the scratch buffers; `bufs` ends up naming whichever pair holds the result.
+    pub fn encode(
+        &self,
+        rec: &mut Recorder,
+        ws: &mut Workspace,
+        prefix_sum: &PrefixSum,
+        bufs: &mut SortBuffers,
+        count: SortCount,
+        bits: u32,
+    ) {
+        let (n, count_buf, count_at) = match count {
+            // The kernels never read it then, but binding 6 must hold some other buffer.
+            SortCount::Host(n) => (
+                n,
+                ws.buffer(rec.ctx(), "radix no count", 16).buffer,
+                HOST_COUNT,
+            ),
+            SortCount::Gpu {
+                capacity,
+                buffer,
+                index,
+            } => (capacity, buffer.clone(), index),
+        };
+        if n <= 1 && count_at == HOST_COUNT {
+            return;
+        }
+        let num_blocks = n.div_ceil(BLOCK).max(1);
+        let histogram = ws.buffer(rec.ctx(), "radix histogram", u64::from(num_blocks) * 16 * 4);
+        for pass in 0..bits.div_ceil(BITS_PER_PASS) {
+            let params = rec.uniform(&Params {
+                n,
+                shift: pass * BITS_PER_PASS,
+                num_blocks,
+                count_at,
+            });
+            self.count.dispatch_1d(
+                rec,
+                &[
+                    (0, &params),
+                    (1, &bufs.keys),
+                    (2, &histogram),
+                    (6, &count_buf),
+                ],
+                num_blocks,
+            );
+            prefix_sum.encode(rec, ws, &histogram, num_blocks * 16);
+            self.scatter.dispatch_1d(
+                rec,
+                &[
+                    (0, &params),
+                    (1, &bufs.keys),
+                    (2, &histogram),
+                    (3, &bufs.values),
+                    (4, &bufs.keys_tmp),
+                    (5, &bufs.values_tmp),
+                    (6, &count_buf),
+                ],
+                num_blocks,
+            );
+            std::mem::swap(&mut bufs.keys, &mut bufs.keys_tmp);
+            std::mem::swap(&mut bufs.values, &mut bufs.values_tmp);
+        }
+    }
+}

@@ -1,0 +1,394 @@
+//! Orchestrates the forward and backward passes of a batch.
+
+use super::batch::{Batch, ParamBuffers};
+use super::state::{ForwardState, Gradients};
+use crate::EngineError;
+use crate::core::{GpuContext, Kernel, Recorder, Workspace, shader};
+use crate::prims::{PrefixSum, RadixSort, SortBuffers, SortCount};
+use crate::types::sh_coeffs_per_channel;
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Globals {
+    num_gaussians: u32,
+    num_images: u32,
+    width: u32,
+    height: u32,
+    tiles_x: u32,
+    tiles_y: u32,
+    sh_coeffs: u32,
+    pad: u32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct TileParams {
+    num_gaussians: u32,
+    num_intersections: u32,
+    tiles_x: u32,
+    tiles_per_image: u32,
+    sentinel_tile: u32,
+    pad: [u32; 3],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct RasterParams {
+    width: u32,
+    height: u32,
+    tiles_x: u32,
+    tiles_y: u32,
+}
+
+/// Compiled pipelines of the engine; build once per device and reuse.
+#[derive(Debug)]
+pub struct Renderer {
+    scan: PrefixSum,
+    sort: RadixSort,
+    project: Kernel,
+    project_backward: Kernel,
+    gather_counts: Kernel,
+    emit_keys: Kernel,
+    tile_ranges: Kernel,
+    check_capacity: Kernel,
+    rasterize: Kernel,
+    rasterize_backward: Kernel,
+}
+
+fn groups(n: u32) -> u32 {
+    n.div_ceil(256)
+}
+
+impl Renderer {
+    /// Uses the fastest gradient accumulation the device supports.
+    pub fn new(ctx: &GpuContext) -> Self {
+        Self::with_options(ctx, true, true)
+    }
+
+    /// Picks the gradient-accumulation variant: `native_atomics = false` forces the
+    /// compare-exchange fallback and `subgroups = false` per-pixel atomics (to test those
+    /// paths on devices that have more); `true` is ignored where the device lacks the feature.
+    pub fn with_options(ctx: &GpuContext, native_atomics: bool, subgroups: bool) -> Self {
+        let common = include_str!("project_common.wgsl");
+        let tile_test = include_str!("tile_test.wgsl");
+        let project = shader(
+            ctx,
+            "project",
+            &format!("{common}\n{tile_test}\n{}", include_str!("project.wgsl")),
+        );
+        let project_bwd = shader(
+            ctx,
+            "project_backward",
+            &format!("{common}\n{}", include_str!("project_backward.wgsl")),
+        );
+        let tiles = shader(
+            ctx,
+            "tiles",
+            &format!("{tile_test}\n{}", include_str!("tiles.wgsl")),
+        );
+        let raster = shader(ctx, "rasterize", include_str!("rasterize.wgsl"));
+        let atomics = if native_atomics && ctx.float_atomics {
+            include_str!("atomic_native.wgsl")
+        } else {
+            include_str!("atomic_cas.wgsl")
+        };
+        let mut raster_bwd_src = include_str!("rasterize_backward.wgsl").to_owned();
+        let flush = if subgroups && ctx.subgroups {
+            raster_bwd_src = raster_bwd_src.replace(
+                "// SUBGROUP_PARAM",
+                "@builtin(subgroup_invocation_id) sg_lane: u32,",
+            );
+            include_str!("flush_subgroup.wgsl")
+        } else {
+            include_str!("flush_direct.wgsl")
+        };
+        let raster_bwd = shader(
+            ctx,
+            "rasterize_backward",
+            &format!("{raster_bwd_src}\n{atomics}\n{flush}"),
+        );
+        Self {
+            scan: PrefixSum::new(ctx),
+            sort: RadixSort::new(ctx),
+            project: Kernel::new(ctx, &project, "project"),
+            project_backward: Kernel::new(ctx, &project_bwd, "project_backward"),
+            gather_counts: Kernel::new(ctx, &tiles, "gather_counts"),
+            emit_keys: Kernel::new(ctx, &tiles, "emit_keys"),
+            tile_ranges: Kernel::new(ctx, &tiles, "tile_ranges"),
+            check_capacity: Kernel::new(ctx, &tiles, "check_capacity"),
+            rasterize: Kernel::new(ctx, &raster, "rasterize"),
+            rasterize_backward: Kernel::new(ctx, &raster_bwd, "rasterize_backward"),
+        }
+    }
+
+    fn globals(batch: &Batch) -> Globals {
+        let (tiles_x, tiles_y) = batch.tiles();
+        Globals {
+            num_gaussians: batch.params.num_gaussians,
+            num_images: batch.num_images(),
+            width: batch.width(),
+            height: batch.height(),
+            tiles_x,
+            tiles_y,
+            sh_coeffs: sh_coeffs_per_channel(batch.params.sh_degree) as u32,
+            pad: 0,
+        }
+    }
+
+    fn raster_params(batch: &Batch) -> RasterParams {
+        let (tiles_x, tiles_y) = batch.tiles();
+        RasterParams {
+            width: batch.width(),
+            height: batch.height(),
+            tiles_x,
+            tiles_y,
+        }
+    }
+
+    /// Renders every image of `batch` into buffers of its own. Sizes the intersection
+    /// buffers by reading the count back (one or two blocking reads); the images stay on the
+    /// GPU. Training loops use `encode_forward`, which never waits.
+    pub fn forward(&self, ctx: &GpuContext, batch: &Batch) -> Result<ForwardState, EngineError> {
+        let mut ws = Workspace::default();
+        let mut capacity = batch.params.num_gaussians.saturating_mul(4).max(1024);
+        loop {
+            let mut rec = ctx.recorder();
+            let mut state = self.encode_forward(&mut rec, &mut ws, batch, capacity);
+            rec.submit();
+            let [_, k]: [u32; 2] = ctx
+                .read(&state.status, 2)?
+                .try_into()
+                .map_err(|_| EngineError::Readback("status has two words".into()))?;
+            if k <= capacity {
+                state.num_intersections = k;
+                return Ok(state);
+            }
+            capacity = k;
+        }
+    }
+
+    /// Records the forward pass of `batch` into `rec`, with every buffer from `ws` and room
+    /// for `capacity` (tile, Gaussian) intersections. No read-back: the true count and an
+    /// overflow flag land in `state.status` on the GPU ([overflowed, count]); an overflowed
+    /// pass rendered only part of its intersections and must be redone with more room.
+    pub fn encode_forward(
+        &self,
+        rec: &mut Recorder,
+        ws: &mut Workspace,
+        batch: &Batch,
+        capacity: u32,
+    ) -> ForwardState {
+        let ctx = rec.ctx();
+        let n = batch.params.num_gaussians;
+        let (tiles_x, tiles_y) = batch.tiles();
+        let globals = rec.uniform(&Self::globals(batch));
+        let projected = ws.zeroed(rec, "projected", u64::from(n) * 48);
+        let rects = ws.buffer(ctx, "rects", u64::from(n) * 16);
+        let counts = ws.buffer(ctx, "tile counts", u64::from(n) * 4);
+        let mut by_depth = SortBuffers {
+            keys: ws.buffer(ctx, "depth keys", u64::from(n) * 4),
+            values: ws.buffer(ctx, "depth ids", u64::from(n) * 4),
+            keys_tmp: ws.buffer(ctx, "depth keys tmp", u64::from(n) * 4),
+            values_tmp: ws.buffer(ctx, "depth ids tmp", u64::from(n) * 4),
+        };
+        let offsets = ws.buffer(ctx, "tile offsets", (u64::from(n) + 1) * 4);
+        let p = &batch.params;
+        self.project.dispatch_1d(
+            rec,
+            &[
+                (0, &globals),
+                (1, &batch.image_infos),
+                (2, &p.means),
+                (3, &p.log_scales),
+                (4, &p.quats),
+                (5, &p.opacity_logits),
+                (6, &p.sh),
+                (7, &projected),
+                (8, &rects),
+                (9, &by_depth.keys),
+                (10, &by_depth.values),
+                (11, &counts),
+            ],
+            groups(n),
+        );
+        self.sort
+            .encode(rec, ws, &self.scan, &mut by_depth, SortCount::Host(n), 32);
+        let total_tiles = tiles_x * tiles_y * batch.num_images();
+        let params = rec.uniform(&TileParams {
+            num_gaussians: n,
+            num_intersections: capacity,
+            tiles_x,
+            tiles_per_image: tiles_x * tiles_y,
+            sentinel_tile: total_tiles,
+            pad: [0; 3],
+        });
+        self.gather_counts.dispatch_1d(
+            rec,
+            &[
+                (0, &params),
+                (1, &by_depth.values),
+                (2, &counts),
+                (3, &offsets),
+            ],
+            groups(n + 1),
+        );
+        self.scan.encode(rec, ws, &offsets, n + 1);
+        let status = ws.buffer(ctx, "forward status", 8);
+        self.check_capacity
+            .dispatch_1d(rec, &[(0, &params), (3, &offsets), (9, &status)], 1);
+        let mut by_tile = SortBuffers {
+            keys: ws.buffer(ctx, "tile keys", u64::from(capacity) * 4),
+            values: ws.buffer(ctx, "tile values", u64::from(capacity) * 4),
+            keys_tmp: ws.buffer(ctx, "tile keys tmp", u64::from(capacity) * 4),
+            values_tmp: ws.buffer(ctx, "tile values tmp", u64::from(capacity) * 4),
+        };
+        // One extra range for the sentinel tile, which no workgroup reads; tiles no
+        // Gaussian touches keep the cleared (0, 0).
+        let ranges = ws.zeroed(rec, "tile ranges", (u64::from(total_tiles) + 1) * 8);
+        self.emit_keys.dispatch_1d(
+            rec,
+            &[
+                (0, &params),
+                (1, &by_depth.values),
+                (2, &counts),
+                (3, &offsets),
+                (4, &rects),
+                (5, &by_tile.keys),
+                (6, &by_tile.values),
+                (8, &projected),
+            ],
+            groups(n),
+        );
+        // Keys run up to the sentinel `total_tiles` inclusive.
+        let tile_bits = u32::BITS - total_tiles.leading_zeros();
+        let count = SortCount::Gpu {
+            capacity,
+            buffer: &offsets,
+            index: n,
+        };
+        self.sort
+            .encode(rec, ws, &self.scan, &mut by_tile, count, tile_bits);
+        self.tile_ranges.dispatch_1d(
+            rec,
+            &[
+                (0, &params),
+                (3, &offsets),
+                (5, &by_tile.keys),
+                (7, &ranges),
+            ],
+            groups(capacity),
+        );
+        let pixels = batch.num_pixels();
+        let state = ForwardState {
+            rgba: ws.buffer(ctx, "rgba", pixels * 16),
+            depth: ws.buffer(ctx, "depth", pixels * 4),
+            final_t: ws.buffer(ctx, "final transmittance", pixels * 4),
+            last: ws.buffer(ctx, "last contributor", pixels * 4),
+            projected,
+            ranges,
+            tile_values: by_tile.values,
+            status,
+            num_intersections: capacity,
+        };
+        let raster = rec.uniform(&Self::raster_params(batch));
+        self.rasterize.dispatch(
+            rec,
+            &[
+                (0, &raster),
+                (1, &batch.backgrounds),
+                (2, &state.ranges),
+                (3, &state.tile_values),
+                (4, &state.projected),
+                (5, &state.rgba),
+                (6, &state.depth),
+                (7, &state.final_t),
+                (8, &state.last),
+            ],
+            [tiles_x, tiles_y, batch.num_images()],
+        );
+        state
+    }
+
+    /// Gradients of a loss with respect to every parameter of `batch`, given the loss's
+    /// gradients with respect to the forward outputs: `v_rgba` (rgb colour, alpha) and
+    /// `v_depth`, both laid out like `state.rgba`/`state.depth`. No GPU→CPU sync.
+    pub fn backward(
+        &self,
+        ctx: &GpuContext,
+        batch: &Batch,
+        state: &ForwardState,
+        v_rgba: &wgpu::Buffer,
+        v_depth: &wgpu::Buffer,
+    ) -> Gradients {
+        let mut rec = ctx.recorder();
+        let grads = self.encode_backward(
+            &mut rec,
+            &mut Workspace::default(),
+            batch,
+            state,
+            v_rgba,
+            v_depth,
+        );
+        rec.submit();
+        grads
+    }
+
+    /// Records `backward` into `rec`, with the gradient buffers from `ws`.
+    pub fn encode_backward(
+        &self,
+        rec: &mut Recorder,
+        ws: &mut Workspace,
+        batch: &Batch,
+        state: &ForwardState,
+        v_rgba: &wgpu::Buffer,
+        v_depth: &wgpu::Buffer,
+    ) -> Gradients {
+        let ctx = rec.ctx();
+        let n = batch.params.num_gaussians;
+        let (tiles_x, tiles_y) = batch.tiles();
+        let v_proj = ws.zeroed(rec, "v_projected", u64::from(n) * 40);
+        let grads = ParamBuffers::gradients_in(ctx, ws, &batch.params);
+        let raster = rec.uniform(&Self::raster_params(batch));
+        let globals = rec.uniform(&Self::globals(batch));
+        self.rasterize_backward.dispatch(
+            rec,
+            &[
+                (0, &raster),
+                (1, &batch.backgrounds),
+                (2, &state.ranges),
+                (3, &state.tile_values),
+                (4, &state.projected),
+                (5, &state.final_t),
+                (6, &state.last),
+                (7, v_rgba),
+                (8, v_depth),
+                (9, &v_proj),
+            ],
+            [tiles_x, tiles_y, batch.num_images()],
+        );
+        let p = &batch.params;
+        self.project_backward.dispatch_1d(
+            rec,
+            &[
+                (0, &globals),
+                (1, &batch.image_infos),
+                (2, &p.means),
+                (3, &p.log_scales),
+                (4, &p.quats),
+                (5, &p.opacity_logits),
+                (6, &p.sh),
+                (7, &v_proj),
+                (8, &grads.means),
+                (9, &grads.log_scales),
+                (10, &grads.quats),
+                (11, &grads.opacity_logits),
+                (12, &grads.sh),
+            ],
+            groups(n),
+        );
+        Gradients {
+            params: grads,
+            v_projected: v_proj,
+        }
+    }
+}

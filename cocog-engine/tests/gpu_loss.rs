@@ -1,0 +1,92 @@
+//! The GPU loss and its gradient against the f64 reference (FD-checked in
+//! reference_loss_fd.rs), and its PSNR partial sums against a plain f64 PSNR, on a batch of
+//! two odd-sized images with predictions outside [0, 1] (which the PSNR clamps).
+
+mod common;
+
+use cocog_engine::reference::loss::image_loss;
+use cocog_engine::{ImageLoss, Workspace};
+use common::{Rng, gpu};
+
+#[test]
+fn gpu_loss_matches_reference() {
+    let Some(ctx) = gpu() else { return };
+    let (w, h, images) = (23usize, 17usize, 2usize);
+    let mut rng = Rng::new(12);
+    let npix = w * h * images;
+    let pred: Vec<[f32; 4]> = (0..npix)
+        .map(|_| std::array::from_fn(|_| rng.range_f32(-0.1, 1.1)))
+        .collect();
+    // A target correlated with the prediction, so SSIM is far from zero.
+    let target: Vec<[f32; 4]> = pred
+        .iter()
+        .map(|p| std::array::from_fn(|k| (p[k] * 0.7 + rng.range_f32(0.0, 0.3)).min(1.0)))
+        .collect();
+    let loss = ImageLoss::new(ctx);
+    for lambda in [0.0f32, 0.2, 1.0] {
+        let mut rec = ctx.recorder();
+        let out = loss.compute(
+            &mut rec,
+            &mut Workspace::default(),
+            &ctx.storage_from("pred", &pred),
+            &ctx.storage_from("target", &target),
+            w as u32,
+            h as u32,
+            images as u32,
+            lambda,
+        );
+        rec.submit();
+        let gpu_loss = out.read_loss(ctx).unwrap();
+        let partials: Vec<u8> = ctx
+            .read(&out.partials, out.partials_bytes() as usize)
+            .unwrap();
+        let value = out.value_from(&partials);
+        assert!((value.loss - gpu_loss).abs() < 1e-12);
+        let sq: f64 = pred
+            .iter()
+            .zip(&target)
+            .flat_map(|(p, t)| (0..3).map(move |k| f64::from(p[k].clamp(0.0, 1.0) - t[k])))
+            .map(|d| d * d)
+            .sum();
+        let ref_psnr = 10.0 * (3.0 * npix as f64 / sq).log10();
+        assert!(
+            (value.psnr - ref_psnr).abs() < 1e-4,
+            "λ={lambda}: PSNR {} vs {ref_psnr}",
+            value.psnr
+        );
+        let gpu_grad: Vec<[f32; 4]> = ctx.read(&out.v_pred, npix).unwrap();
+        let mut ref_loss = 0.0;
+        let mut ref_grad = Vec::new();
+        for i in 0..images {
+            let rgb = |v: &[[f32; 4]]| -> Vec<[f64; 3]> {
+                v[i * w * h..(i + 1) * w * h]
+                    .iter()
+                    .map(|p| [p[0], p[1], p[2]].map(f64::from))
+                    .collect()
+            };
+            let (l, g) = image_loss(&rgb(&pred), &rgb(&target), w, h, f64::from(lambda));
+            ref_loss += l / images as f64;
+            ref_grad.extend(g.into_iter().map(|g| g.map(|v| v / images as f64)));
+        }
+        assert!(
+            (gpu_loss - ref_loss).abs() < 1e-5 * ref_loss.abs().max(1e-3),
+            "λ={lambda}: loss {gpu_loss} vs {ref_loss}"
+        );
+        let scale = ref_grad
+            .iter()
+            .flatten()
+            .fold(0.0f64, |m, v| m.max(v.abs()));
+        for (p, (g, r)) in gpu_grad.iter().zip(&ref_grad).enumerate() {
+            for k in 0..3 {
+                let err = (f64::from(g[k]) - r[k]).abs();
+                assert!(
+                    err < 1e-3 * scale,
+                    "λ={lambda} pixel {p} channel {k}: {} vs {}",
+                    g[k],
+                    r[k]
+                );
+            }
+            assert_eq!(g[3], 0.0, "alpha gradient must stay zero");
+        }
+    }
+}

@@ -1,0 +1,68 @@
+//! Room for the renderer's (tile, Gaussian) intersections. A step never waits to learn how
+//! many it needs: the count comes back a few steps late, room grows ahead of it, and a step
+//! that still overflowed was skipped on the GPU and its view is trained again.
+
+use super::Trainer;
+use crate::TrainError;
+
+/// Room kept above the largest count seen.
+const HEADROOM: f64 = 1.5;
+/// Grow once a count comes this close to the room.
+const GROW_AT: f64 = 0.8;
+
+impl Trainer<'_> {
+    /// Room for the most intersections any training view needs now, with headroom: one
+    /// blocking count per view, at start-up only.
+    pub(super) fn measure_capacity(&mut self) -> Result<u32, TrainError> {
+        let ctx = self.ctx;
+        let mut batch = self.batch.take().ok_or(TrainError::Poisoned)?;
+        let mut most = 0u32;
+        let mut result = Ok(());
+        for camera in self.cameras.clone() {
+            result = self.aim(&mut batch, camera, self.config.background);
+            if result.is_err() {
+                break;
+            }
+            let mut rec = ctx.recorder();
+            // Room for none: only the count in `status` is wanted.
+            let state = self
+                .renderer
+                .encode_forward(&mut rec, &mut self.ws, &batch, 0);
+            rec.submit();
+            match ctx.read::<u32>(&state.status, 2) {
+                Ok(words) => most = most.max(words[1]),
+                Err(e) => {
+                    result = Err(e.into());
+                    break;
+                }
+            }
+        }
+        self.batch = Some(batch);
+        result?;
+        Ok(with_headroom(most))
+    }
+
+    /// A step needed `needed` intersections: grow the room before later steps run out.
+    pub(super) fn note_intersections(&mut self, needed: u32) {
+        if f64::from(needed) > GROW_AT * f64::from(self.capacity) {
+            self.capacity = self.capacity.max(with_headroom(needed));
+        }
+    }
+
+    /// Densification changed the Gaussian count from `before`: scale the room with it, since
+    /// the counts of the next few steps arrive too late to prevent an overflow.
+    pub(super) fn grow_capacity_with(&mut self, before: u32) {
+        let ratio = f64::from(self.num_gaussians()) / f64::from(before.max(1));
+        if ratio > 1.0 {
+            let grown = (f64::from(self.capacity) * ratio).ceil();
+            self.capacity = grown.min(f64::from(u32::MAX)) as u32;
+        }
+    }
+}
+
+fn with_headroom(count: u32) -> u32 {
+    ((f64::from(count) * HEADROOM)
+        .ceil()
+        .min(f64::from(u32::MAX)) as u32)
+        .max(1024)
+}

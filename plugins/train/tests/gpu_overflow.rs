@@ -1,0 +1,57 @@
+//! Issue #11's overflow path on a real trainer: a step recorded with too little room for
+//! its intersections changes nothing on the GPU, gives no reading, and its view is trained
+//! again once the count comes back.
+
+mod common;
+
+use cocog_train::{SplitMix64, TrainConfig, Trainer};
+use common::*;
+
+#[test]
+fn an_overflowed_step_is_skipped_on_the_gpu_and_its_view_trained_again() {
+    let Some(ctx) = gpu() else { return };
+    let mut rng = SplitMix64::new(8);
+    let s = scene(ctx, &mut rng);
+    let init = noisy_init(&s.truth, 2, &mut rng);
+    let config = TrainConfig {
+        iterations: 40,
+        loss_every: 1,
+        max_sh_degree: 0,
+        densify: None,
+        seed: 9,
+        ..TrainConfig::default()
+    };
+    let mut trainer = Trainer::new(ctx, &init, &s.train, config.clone()).unwrap();
+    let mut order = cocog_train::ViewOrder::new(s.train.len(), config.seed);
+    for _ in 0..5 {
+        assert_eq!(Some(trainer.step().unwrap().view), order.next_view());
+    }
+    // Drained first: counts still in flight would restore the room before the next step.
+    trainer.finish().unwrap();
+    let before = trainer.gaussians().unwrap();
+    trainer.set_intersection_capacity(1);
+    let starved = trainer.step().unwrap();
+    assert_eq!(Some(starved.view), order.next_view());
+    // The starved step changed nothing on the GPU.
+    assert_eq!(trainer.gaussians().unwrap(), before);
+    let mut views = Vec::new();
+    let mut logged = Vec::new();
+    for _ in 0..6 {
+        let st = trainer.step().unwrap();
+        views.push(st.view);
+        logged.extend(st.readings.iter().map(|r| r.iteration));
+    }
+    logged.extend(trainer.finish().unwrap().iter().map(|r| r.iteration));
+    assert!(
+        trainer.intersection_capacity() > 1,
+        "the room grew back from the reported count"
+    );
+    // No reading for the skipped iteration, and its view came back once the CPU learnt of it.
+    assert!(!logged.contains(&starved.iteration), "{logged:?}");
+    assert!(
+        views.contains(&starved.view),
+        "{views:?} lacks {}",
+        starved.view
+    );
+    assert_ne!(trainer.gaussians().unwrap(), before);
+}
