@@ -43,7 +43,8 @@ pub struct Global {
     /// Replace the output if it already exists.
     #[arg(long, global = true)]
     pub force: bool,
-    /// Print the stage's result as JSON on stdout instead of the output path.
+    /// Print the stage's result as JSON on stdout instead of the output path (its `output`
+    /// field names the path).
     #[arg(long, global = true)]
     pub json: bool,
     /// Only warnings and errors on stderr, no progress bars.
@@ -52,6 +53,16 @@ pub struct Global {
     /// Debug logs on stderr.
     #[arg(short, long, global = true)]
     pub verbose: bool,
+    /// When stderr is not a terminal (a log file, CI), print a progress line for a running
+    /// task every SECONDS; 0 turns them off. On a terminal, progress bars show instead.
+    #[arg(
+        long = "progress-every",
+        global = true,
+        value_name = "SECONDS",
+        default_value_t = 10.0,
+        value_parser = seconds
+    )]
+    pub progress_every: f64,
 }
 
 #[derive(Subcommand)]
@@ -94,13 +105,21 @@ pub enum DatasetFormat {
     Llff,
     /// A transforms.json dataset (NeRF-synthetic or nerfstudio).
     Nerf,
+    /// A folder of photos (or a dataset with images/): runs COLMAP to pose them.
+    Photos,
 }
 
 #[derive(Args)]
+#[command(
+    after_help = "Photos: `cocog ingest photos DIR -o SCENE` runs COLMAP (feature \
+extraction, matching, mapping, undistortion when the lens needs it) in SCENE/colmap/, keeping its \
+log there. Install COLMAP first (Debian/Ubuntu: apt install colmap). Photos that do not register \
+are listed with COLMAP's reason. Defocused photos: domain-size pooling is on by default."
+)]
 pub struct IngestArgs {
     #[arg(value_enum)]
     pub format: DatasetFormat,
-    /// The dataset directory.
+    /// The dataset directory (photos: a folder of png/jpg, or a dataset holding images/).
     pub dataset: PathBuf,
     /// The scene directory to create.
     #[arg(short, long)]
@@ -108,8 +127,8 @@ pub struct IngestArgs {
     /// Use images downscaled by N (LLFF images_N/ when present, else resampled). Default 1.
     #[arg(long)]
     pub downscale: Option<u32>,
-    /// Test split: every N-th view after sorting names. Default: the dataset's hold=N
-    /// marker, else 8.
+    /// Test split: every N-th view after sorting names; 0 = no test views (every view trains).
+    /// Default: the dataset's split (transforms.json), else its hold=N marker, else 8.
     #[arg(long)]
     pub hold: Option<u32>,
     /// COLMAP: which sparse/N model to use. Default: the one with most images.
@@ -119,6 +138,53 @@ pub struct IngestArgs {
     /// Refused by default: a dataset file should not point cocog at other files.
     #[arg(long = "allow-outside")]
     pub allow_outside: bool,
+    #[command(flatten)]
+    pub photos: PhotosArgs,
+}
+
+/// Options of `cocog ingest photos` only.
+#[derive(Args)]
+pub struct PhotosArgs {
+    /// photos: the COLMAP program. Default: `colmap` on PATH.
+    #[arg(long)]
+    pub colmap: Option<PathBuf>,
+    /// photos: auto (exhaustive up to 300 photos, else vocab-tree with --vocab-tree, else
+    /// sequential), exhaustive, sequential (photos in capture order) or vocab-tree.
+    #[arg(long)]
+    pub matcher: Option<String>,
+    /// photos: COLMAP vocabulary tree file, for --matcher vocab-tree.
+    #[arg(long = "vocab-tree")]
+    pub vocab_tree: Option<PathBuf>,
+    /// photos: camera model COLMAP fits: SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL (default),
+    /// RADIAL, OPENCV. Distorted cameras are undistorted to pinholes afterwards.
+    #[arg(long = "camera-model")]
+    pub camera_model: Option<String>,
+    /// photos: one camera per photo (zoom lenses, mixed cameras) instead of one shared camera.
+    #[arg(long = "camera-per-image")]
+    pub camera_per_image: bool,
+    /// photos: at most this many SIFT features per photo.
+    #[arg(long = "max-features")]
+    pub max_features: Option<i64>,
+    /// photos: turn off domain-size pooling (on by default: it helps with defocus blur, but
+    /// forces COLMAP's CPU SIFT).
+    #[arg(long = "no-dsp")]
+    pub no_dsp: bool,
+    /// photos: Lowe's ratio for SIFT matches (higher = looser).
+    #[arg(long = "max-ratio", value_parser = finite)]
+    pub max_ratio: Option<f64>,
+    /// photos: re-match each image pair guided by its two-view geometry.
+    #[arg(long = "guided-matching")]
+    pub guided_matching: bool,
+    /// photos: COLMAP's own triangulation angles (16° initial pair), for captures that
+    /// orbit the scene; the default suits forward-facing captures (2°).
+    #[arg(long = "orbit")]
+    pub orbit: bool,
+    /// photos: let COLMAP use GPU SIFT (a CUDA build of COLMAP).
+    #[arg(long = "colmap-gpu")]
+    pub colmap_gpu: bool,
+    /// photos: fail unless this many photos register. Default: half of them, at least 3.
+    #[arg(long = "min-registered")]
+    pub min_registered: Option<u32>,
 }
 
 #[derive(Args)]
@@ -168,6 +234,13 @@ pub enum Method {
 }
 
 #[derive(Args)]
+#[command(
+    after_help = "While training runs, OUTPUT.train-log.jsonl grows by one JSON line per \
+reading (follow it with `tail -f`): `start`, then the training view's loss and PSNR every 100 \
+iterations (every tenth of a short run), `eval` records with --eval-every, and a closing \
+`summary`. When training succeeds it becomes OUTPUT/train-log.jsonl; when it is interrupted it \
+stays beside OUTPUT.checkpoint and --resume continues both."
+)]
 pub struct TrainArgs {
     #[command(flatten)]
     pub io: SceneToScene,
@@ -202,6 +275,10 @@ pub struct TrainArgs {
     /// Default 1000.
     #[arg(long = "checkpoint-every")]
     pub checkpoint_every: Option<u64>,
+    /// Score the test views (PSNR, SSIM) every N iterations and at the end, into the log
+    /// (`eval` records) and onto stderr. Default 0: never.
+    #[arg(long = "eval-every")]
+    pub eval_every: Option<u64>,
     #[command(flatten)]
     pub schedule: ScheduleArgs,
 }
@@ -261,6 +338,16 @@ pub struct ScheduleArgs {
     /// Raise the spherical-harmonics degree every N iterations. Default 1000.
     #[arg(long = "sh-every")]
     pub sh_every: Option<u64>,
+}
+
+/// A duration in seconds: finite and not negative.
+fn seconds(s: &str) -> Result<f64, String> {
+    let v = finite(s)?;
+    if v >= 0.0 {
+        Ok(v)
+    } else {
+        Err(format!("{s} is negative"))
+    }
 }
 
 /// A number that is not NaN or infinite (JSON cannot carry those, and they mean nothing here).

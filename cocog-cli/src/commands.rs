@@ -50,11 +50,43 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
                 DatasetFormat::Colmap => "ingest-colmap",
                 DatasetFormat::Llff => "ingest-llff",
                 DatasetFormat::Nerf => "ingest-nerf",
+                DatasetFormat::Photos => "ingest-photos",
             };
-            let o = options! {
+            let mut o = options! {
                 "downscale" => a.downscale, "hold" => a.hold, "model" => a.model,
                 "allow-outside" => a.allow_outside.then_some(true),
             };
+            let p = &a.photos;
+            let photos = options! {
+                "colmap" => p.colmap.as_ref().map(|c| c.display().to_string()),
+                "matcher" => p.matcher.clone(), "vocab-tree" => p.vocab_tree.as_ref().map(|c| c.display().to_string()),
+                "camera-model" => p.camera_model.clone(),
+                "camera-per-image" => p.camera_per_image.then_some(true),
+                "max-features" => p.max_features, "dsp" => p.no_dsp.then_some(false),
+                "max-ratio" => p.max_ratio, "guided-matching" => p.guided_matching.then_some(true),
+                "gpu" => p.colmap_gpu.then_some(true), "min-registered" => p.min_registered,
+                "narrow-baseline" => p.orbit.then_some(false),
+            };
+            if let (false, Some(key)) = (name == "ingest-photos", photos.keys().next()) {
+                let flag = match key.as_str() {
+                    "dsp" => "no-dsp",
+                    "gpu" => "colmap-gpu",
+                    "narrow-baseline" => "orbit",
+                    k => k,
+                };
+                anyhow::bail!("--{flag} is an option of `cocog ingest photos` only");
+            }
+            o.extend(photos);
+            if name == "ingest-photos" {
+                // Beside the output, not in it: the runner discards a failed run's staging
+                // folder, and a failed COLMAP run is when the log matters most.
+                let mut log = a.output.clone().into_os_string();
+                log.push(".colmap.log");
+                o.insert(
+                    "log".into(),
+                    Value::from(log.to_string_lossy().into_owned()),
+                );
+            }
             run(name, &a.dataset, &a.output, o)
         }
         Command::Densify(a) => {
@@ -69,9 +101,13 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
                 Method::Gs3d => "3dgs",
             });
             // Beside the output, not in it: the runner discards a failed run's staging folder,
-            // and the checkpoint is what lets an interrupted run continue.
-            let mut checkpoint_dir = a.io.output.clone().into_os_string();
-            checkpoint_dir.push(".checkpoint");
+            // and the checkpoint is what lets an interrupted run continue. The log sits there
+            // too, under a name the user can `tail -f` while the output does not exist yet.
+            let beside = |suffix: &str| {
+                let mut p = a.io.output.clone().into_os_string();
+                p.push(suffix);
+                std::path::PathBuf::from(p).display().to_string()
+            };
             let mut o = options! {
                 "method" => method, "iterations" => a.iterations,
                 "coc_gaussians" => a.coc_gaussians, "downscale" => a.downscale, "seed" => a.seed,
@@ -79,7 +115,8 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
                 "random_background" => a.random_background.then_some(true),
                 "resume" => a.resume.as_ref().map(|p| p.display().to_string()),
                 "checkpoint_every" => a.checkpoint_every,
-                "checkpoint_dir" => Some(std::path::PathBuf::from(checkpoint_dir).display().to_string()),
+                "checkpoint_dir" => Some(beside(".checkpoint")),
+                "live_log" => Some(beside(".train-log.jsonl")), "eval_every" => a.eval_every,
             };
             let s = &a.schedule;
             let preset = s.schedule.map(|p| match p {
@@ -283,9 +320,18 @@ fn eval(
     }
 }
 
+/// The output path on stdout, or with `--json` the stage's summary, which then names the
+/// output too (`output`), so a script needs nothing else to find it.
 pub fn print_result(g: &Global, summary: &Value, output: &Path) -> Result<()> {
     if g.json {
-        println!("{}", serde_json::to_string_pretty(summary)?);
+        let mut summary = summary.clone();
+        if let Some(map) = summary.as_object_mut() {
+            map.insert(
+                "output".to_owned(),
+                Value::from(output.display().to_string()),
+            );
+        }
+        println!("{}", serde_json::to_string_pretty(&summary)?);
     } else {
         println!("{}", output.display());
     }

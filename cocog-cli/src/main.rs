@@ -36,6 +36,10 @@ fn main() -> ExitCode {
         // SAFETY: nothing else runs yet (no threads: the Ctrl-C handler starts below).
         unsafe { std::env::set_var("COCOG_ADAPTER", name) };
     }
+    // Without it, a headless machine's stderr says `error: XDG_RUNTIME_DIR is invalid` on
+    // every GPU command although nothing failed (why: cocog_engine's headless.rs).
+    // SAFETY: as above, no other thread exists yet.
+    unsafe { cocog_engine::quiet_headless_vulkan() };
     let level = if cli.global.quiet {
         LogLevel::Warn
     } else if cli.global.verbose {
@@ -58,7 +62,7 @@ fn main() -> ExitCode {
         }
         eprintln!("\ncancelling: finishing the current step (Ctrl-C again to abort)");
     });
-    let ctx = CliContext::new(level, cancel);
+    let ctx = CliContext::new(level, cancel, cli.global.progress_every);
     match commands::dispatch(&cli, &ctx) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

@@ -1,4 +1,8 @@
 //! The terminal side of a running stage: indicatif bars, log lines and Ctrl-C.
+//!
+//! Without a terminal (a log file, CI, `nohup`), bars would be noise, and a stage's own log
+//! lines may come only every tenth of the run: hours apart on a slow machine. There a running
+//! task prints a progress line at a steady interval instead (`--progress-every`).
 
 use std::collections::HashMap;
 use std::io::IsTerminal;
@@ -15,18 +19,26 @@ pub struct CliContext {
     tasks: Mutex<HashMap<String, Task>>,
     level: LogLevel,
     show_bars: bool,
+    /// Interval of the progress lines printed instead of bars; `None`: none.
+    line_every: Option<Duration>,
     cancel: Arc<AtomicBool>,
 }
 
 struct Task {
     bar: ProgressBar,
     started: Instant,
+    last_line: Instant,
 }
 
 impl CliContext {
-    pub fn new(level: LogLevel, cancel: Arc<AtomicBool>) -> Self {
+    /// `line_every`: seconds between progress lines when stderr is not a terminal; 0: none.
+    pub fn new(level: LogLevel, cancel: Arc<AtomicBool>, line_every: f64) -> Self {
         // Bars only make sense on a terminal; in CI and pipes they would be noise.
         let show_bars = level >= LogLevel::Info && std::io::stderr().is_terminal();
+        // A duration too long to represent is as good as never.
+        let line_every = (level >= LogLevel::Info && !show_bars && line_every > 0.0)
+            .then(|| Duration::try_from_secs_f64(line_every).ok())
+            .flatten();
         let target = if show_bars {
             ProgressDrawTarget::stderr()
         } else {
@@ -37,6 +49,7 @@ impl CliContext {
             tasks: Mutex::new(HashMap::new()),
             level,
             show_bars,
+            line_every,
             cancel,
         }
     }
@@ -86,6 +99,7 @@ impl Context for CliContext {
         let t = tasks.entry(task.to_owned()).or_insert_with(|| Task {
             bar: self.new_bar(task, total),
             started: Instant::now(),
+            last_line: Instant::now(),
         });
         if total > 0 && t.bar.length() != Some(total) {
             t.bar.set_length(total);
@@ -100,10 +114,58 @@ impl Context for CliContext {
                 LogLevel::Info,
                 &format!("{task}: {done}/{total} in {secs:.1} s ({rate:.1}/s)"),
             );
+        } else if let Some(every) = self.line_every
+            && t.last_line.elapsed() >= every
+        {
+            t.last_line = Instant::now();
+            eprintln!("{}", progress_line(task, done, total, t.started.elapsed()));
         }
     }
 
     fn cancelled(&self) -> bool {
         self.cancel.load(Ordering::Relaxed)
+    }
+}
+
+/// `train: 1200/7000 (17%), 9.8/s, 2m 03s elapsed, about 9m 55s left`; without a total, the
+/// count and rate only.
+fn progress_line(task: &str, done: u64, total: u64, elapsed: Duration) -> String {
+    let secs = elapsed.as_secs_f64();
+    let rate = if secs > 0.0 { done as f64 / secs } else { 0.0 };
+    let mut line = format!("{task}: {done}");
+    if total > 0 {
+        let percent = 100.0 * done as f64 / total as f64;
+        line.push_str(&format!("/{total} ({percent:.0}%)"));
+    }
+    line.push_str(&format!(", {rate:.1}/s, {} elapsed", clock(secs)));
+    if total > done && rate > 0.0 {
+        let left = (total - done) as f64 / rate;
+        line.push_str(&format!(", about {} left", clock(left)));
+    }
+    line
+}
+
+fn clock(secs: f64) -> String {
+    let s = secs.round() as u64;
+    match (s / 3600, s / 60 % 60, s % 60) {
+        (0, 0, s) => format!("{s}s"),
+        (0, m, s) => format!("{m}m {s:02}s"),
+        (h, m, _) => format!("{h}h {m:02}m"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn progress_lines_give_count_rate_and_time_left() {
+        let line = progress_line("train", 1200, 7000, Duration::from_secs(123));
+        assert_eq!(
+            line,
+            "train: 1200/7000 (17%), 9.8/s, 2m 03s elapsed, about 9m 55s left"
+        );
+        let line = progress_line("load", 5, 0, Duration::from_secs(4000));
+        assert_eq!(line, "load: 5, 0.0/s, 1h 06m elapsed");
     }
 }

@@ -13,7 +13,7 @@ use crate::scene::Scene;
 use crate::stage::{OutputKind, StageKind};
 
 /// Options the pipeline sets itself; a resumed stage is "the same" whatever their values.
-const RUNNER_OPTIONS: [&str; 2] = ["checkpoint_dir", "resume"];
+const RUNNER_OPTIONS: [&str; 3] = ["checkpoint_dir", "live_log", "resume"];
 
 /// A `pipeline.toml`: a `[pipeline]` table and one optional table of options per stage.
 ///
@@ -27,8 +27,9 @@ const RUNNER_OPTIONS: [&str; 2] = ["checkpoint_dir", "resume"];
 /// points = 200000
 /// ```
 /// Intermediate results go to `<output>.stages/NN-<stage>/`, so each can be inspected
-/// or used to rerun part of the chain; a training stage keeps its checkpoint beside its own
-/// output (`<its output>.checkpoint/`) until it succeeds.
+/// or used to rerun part of the chain; a training stage keeps its checkpoint and its log beside
+/// its own output (`<its output>.checkpoint/`, `<its output>.train-log.jsonl`) until it
+/// succeeds.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct PipelineHeader {
@@ -127,7 +128,20 @@ pub fn run_pipeline(
         } else {
             work.join(format!("{:02}-{name}", i + 1))
         };
-        let checkpoint = checkpoint_dir(entry, &step_out, &mut options);
+        let checkpoint = beside(
+            entry,
+            &step_out,
+            "checkpoint_dir",
+            "checkpoint",
+            &mut options,
+        );
+        beside(
+            entry,
+            &step_out,
+            "live_log",
+            "train-log.jsonl",
+            &mut options,
+        );
         steps.push(Step {
             name,
             entry,
@@ -173,33 +187,27 @@ pub fn run_pipeline(
     Ok(json!({ "output": output, "stages": done }))
 }
 
-/// Where a stage that can checkpoint (it has a `checkpoint_dir` option) keeps it, unless
-/// the file says otherwise; the option is filled in.
-fn checkpoint_dir(
+/// Where a stage keeps an in-progress file that has an option naming it (`checkpoint_dir`,
+/// `live_log`): `<output>.<suffix>` unless the file says otherwise; the option is filled in.
+fn beside(
     entry: &StageEntry,
     output: &Path,
+    option: &str,
+    suffix: &str,
     options: &mut Map<String, Value>,
 ) -> Option<PathBuf> {
-    if !entry
-        .info
-        .options
-        .iter()
-        .any(|o| o.name == "checkpoint_dir")
-    {
+    if !entry.info.options.iter().any(|o| o.name == option) {
         return None;
     }
-    let dir = match options.get("checkpoint_dir").and_then(Value::as_str) {
+    let path = match options.get(option).and_then(Value::as_str) {
         Some(given) => PathBuf::from(given),
         None => {
-            let dir = PathBuf::from(format!("{}.checkpoint", output.display()));
-            options.insert(
-                "checkpoint_dir".into(),
-                Value::String(dir.display().to_string()),
-            );
-            dir
+            let path = PathBuf::from(format!("{}.{suffix}", output.display()));
+            options.insert(option.into(), Value::String(path.display().to_string()));
+            path
         }
     };
-    Some(dir)
+    Some(path)
 }
 
 /// Did an earlier run finish this stage from this input with these options? Only scene

@@ -164,24 +164,31 @@ pub fn run_stage(
     Ok(summary)
 }
 
-/// A stage that kept an in-progress checkpoint (its `checkpoint_dir` option) says when its
-/// committed output supersedes it; only then, and only that directory, is removed.
+/// A stage that kept in-progress files beside its output (its `checkpoint_dir` and
+/// `live_log` options: a checkpoint, the log the user follows) says when its committed output
+/// supersedes them; only then, and only those, are removed. Until then they are what lets an
+/// interrupted run continue, log included.
 fn remove_superseded_checkpoint(options: &Options, summary: &Value, ctx: &dyn Context) {
     let done = summary
         .get("checkpoint_superseded")
         .and_then(Value::as_bool)
         == Some(true);
-    let Some(dir) = options
-        .get_path("checkpoint_dir")
-        .filter(|d| done && d.is_dir())
-    else {
+    if !done {
         return;
-    };
-    if let Err(e) = std::fs::remove_dir_all(&dir) {
-        ctx.warn(&format!(
-            "{}: could not remove the finished run's checkpoint: {e}",
-            dir.display()
-        ));
+    }
+    let dir = options.get_path("checkpoint_dir").filter(|d| d.is_dir());
+    let log = options.get_path("live_log").filter(|f| f.is_file());
+    let removed = [
+        dir.map(|d| (std::fs::remove_dir_all(&d), d, "checkpoint")),
+        log.map(|f| (std::fs::remove_file(&f), f, "log")),
+    ];
+    for (result, path, what) in removed.into_iter().flatten() {
+        if let Err(e) = result {
+            ctx.warn(&format!(
+                "{}: could not remove the finished run's {what}: {e}",
+                path.display()
+            ));
+        }
     }
 }
 

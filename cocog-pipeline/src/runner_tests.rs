@@ -1,5 +1,5 @@
 //! The runner's history entry (options as validated, and what the stage resolved), and the
-//! checkpoint it removes once a stage's output supersedes it.
+//! checkpoint and live log it removes once a stage's output supersedes them.
 
 use std::path::Path;
 use std::sync::Arc;
@@ -76,7 +76,8 @@ fn history_records_the_options_and_what_the_stage_resolved() {
     assert_eq!(old.history[0].resolved, None);
 }
 
-/// Leaves its checkpoint directory alone and says whether its output supersedes it.
+/// Leaves its checkpoint directory and live log alone and says whether its output supersedes
+/// them.
 struct Checkpointing;
 
 impl Stage for Checkpointing {
@@ -88,6 +89,7 @@ impl Stage for Checkpointing {
             description: "test stage".into(),
             options: vec![
                 OptionSpec::optional("checkpoint_dir", crate::OptionKind::Path, "where"),
+                OptionSpec::optional("live_log", crate::OptionKind::Path, "where"),
                 OptionSpec::bool("done", true, "whether the output supersedes it"),
             ],
         }
@@ -100,7 +102,7 @@ impl Stage for Checkpointing {
 }
 
 #[test]
-fn a_superseded_checkpoint_is_removed_after_the_commit_and_only_then() {
+fn a_superseded_checkpoint_and_log_are_removed_after_the_commit_and_only_then() {
     let tmp = tempfile::tempdir().unwrap();
     let input = tmp.path().join("in");
     std::fs::create_dir(&input).unwrap();
@@ -112,16 +114,20 @@ fn a_superseded_checkpoint_is_removed_after_the_commit_and_only_then() {
         provider: Provider::BuiltIn,
     };
     let ckpt = tmp.path().join("out.checkpoint");
+    let log = tmp.path().join("out.train-log.jsonl");
     for (done, kept) in [(false, true), (true, false)] {
         std::fs::create_dir_all(&ckpt).unwrap();
         std::fs::write(ckpt.join("state.safetensors"), b"x").unwrap();
+        std::fs::write(&log, b"{}\n").unwrap();
         let given: Map<String, Value> = serde_json::from_value(json!({
             "checkpoint_dir": ckpt.display().to_string(), "done": done,
+            "live_log": log.display().to_string(),
         }))
         .unwrap();
         let out = tmp.path().join("out");
         run_stage(&entry, &input, &out, &given, true, &NullContext).unwrap();
         assert!(out.join("scene.json").exists());
         assert_eq!(ckpt.exists(), kept, "superseded: {done}");
+        assert_eq!(log.exists(), kept, "superseded: {done}");
     }
 }

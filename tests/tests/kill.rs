@@ -1,6 +1,6 @@
 //! SIGKILL in the middle of training — of `cocog train` and of a `cocog run` pipeline —
-//! then resume: at most one checkpoint interval is lost, nothing stale is left beside the
-//! output, and the result matches an uninterrupted run.
+//! then resume: at most one checkpoint interval is lost, the log keeps every earlier line,
+//! nothing stale is left beside the output, and the result matches an uninterrupted run.
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -59,22 +59,38 @@ fn kill_after_checkpoints(mut child: Child, ckpt: &Path) {
     child.wait().expect("reap");
 }
 
-/// The furthest iteration the killed run logged (train-log.jsonl in its staging folder,
-/// written line by line).
-fn last_logged_iteration(parent: &Path, output_name: &str) -> u64 {
-    let prefix = format!(".{output_name}.cocog-tmp-");
-    let names = listing(parent);
-    let staging = names
-        .iter()
-        .find(|n| n.starts_with(&prefix))
-        .unwrap_or_else(|| panic!("a killed run leaves its staging folder: {names:?}"));
-    let log = std::fs::read_to_string(parent.join(staging).join("train-log.jsonl"))
-        .expect("the killed run's train-log.jsonl");
+/// The log's training readings, by iteration.
+fn logged_iterations(log: &str) -> Vec<u64> {
     log.lines()
         .filter_map(|l| serde_json::from_str::<Value>(l).ok())
         .filter_map(|v| v["iteration"].as_u64())
-        .max()
-        .unwrap_or_else(|| panic!("the killed run logged no iteration:\n{log}"))
+        .collect()
+}
+
+/// The furthest iteration the killed run logged (OUTPUT.train-log.jsonl beside its output,
+/// written line by line), and the log.
+fn last_logged_iteration(parent: &Path, output_name: &str) -> (u64, String) {
+    let path = parent.join(format!("{output_name}.train-log.jsonl"));
+    let log = std::fs::read_to_string(&path).expect("the killed run's live log");
+    let last = logged_iterations(&log).into_iter().max();
+    let last = last.unwrap_or_else(|| panic!("the killed run logged no iteration:\n{log}"));
+    (last, log)
+}
+
+/// The finished output's log begins with everything the killed run logged, then the resumed
+/// run's `start` record and its readings up to the end.
+fn assert_log_continues(output: &Path, killed_log: &str, from: u64) {
+    let log = std::fs::read_to_string(output.join("train-log.jsonl")).expect("final log");
+    assert!(log.starts_with(killed_log), "earlier lines lost:\n{log}");
+    // A line the kill cut short was ended before the resumed run's first.
+    let rest: Vec<Value> = log[killed_log.len()..]
+        .lines()
+        .filter(|l| !l.is_empty())
+        .map(|l| serde_json::from_str(l).expect("JSON line"))
+        .collect();
+    assert_eq!(rest[0]["start"]["iteration"], from, "{log}");
+    let last = logged_iterations(&log).into_iter().max();
+    assert_eq!(last.map(|i| i.to_string()).as_deref(), Some(ITERATIONS));
 }
 
 fn test_psnr(scene: &Path) -> f64 {
@@ -112,7 +128,7 @@ fn sigkilled_training_resumes_to_the_uninterrupted_result() {
     let killed = work.path().join("killed");
     let ckpt = work.path().join("killed.checkpoint");
     kill_after_checkpoints(spawn(&train_args(&scene, &killed)), &ckpt);
-    let reached = last_logged_iteration(work.path(), "killed");
+    let (reached, killed_log) = last_logged_iteration(work.path(), "killed");
 
     // A fresh run refuses to overwrite the checkpoint; resuming continues it.
     let out = cocog(&train_args(&scene, &killed));
@@ -128,6 +144,8 @@ fn sigkilled_training_resumes_to_the_uninterrupted_result() {
         from >= EVERY && from + EVERY >= reached,
         "resumed at {from}, killed past {reached}"
     );
+    assert_eq!(summary["output"], path_str(&killed));
+    assert_log_continues(&killed, &killed_log, from);
 
     let names = listing(work.path());
     assert_eq!(
@@ -159,7 +177,7 @@ fn a_sigkilled_pipeline_resumes_its_training_stage() {
     // Training is the last stage, so its checkpoint sits beside the pipeline's output.
     let ckpt = work.path().join("out.checkpoint");
     kill_after_checkpoints(spawn(&["run", path_str(&pipeline)]), &ckpt);
-    let reached = last_logged_iteration(work.path(), "out");
+    let (reached, killed_log) = last_logged_iteration(work.path(), "out");
 
     let out = cocog(&["run", path_str(&pipeline), "--resume", "--json"]);
     let err = stderr(&out);
@@ -174,6 +192,7 @@ fn a_sigkilled_pipeline_resumes_its_training_stage() {
         from >= EVERY && from + EVERY >= reached,
         "resumed at {from}, killed past {reached}"
     );
+    assert_log_continues(&work.path().join("out"), &killed_log, from);
     assert_eq!(
         listing(work.path()),
         vec!["data", "out", "out.stages", "p.toml"]

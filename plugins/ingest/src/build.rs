@@ -42,16 +42,23 @@ pub(crate) struct Ingested {
 
 pub(crate) struct Settings {
     pub downscale: u32,
-    /// 0: use the dataset's own split (per-frame splits, else the hold=N marker, else 8).
-    pub hold: u32,
+    /// `None`: the dataset's own split (per-frame splits, else the hold=N marker, else 8).
+    /// `Some(0)`: every view trains. `Some(n)`: every n-th view in name order is a test view.
+    pub hold: Option<u32>,
     /// Accept image and depth paths that lead outside the dataset folder.
     pub allow_outside: bool,
 }
 
 /// Refusals that need no image read, so a bad dataset or option fails before any work.
-fn preflight(dataset: &Path, views: &[RawView], settings: &Settings) -> Result<(), StageError> {
+fn preflight(
+    dataset: &Path,
+    out: &Path,
+    views: &[RawView],
+    settings: &Settings,
+) -> Result<(), StageError> {
     for raw in views {
-        if !settings.allow_outside {
+        // Photos the stage itself wrote into the output (undistorted) are not the dataset's.
+        if !settings.allow_outside && !raw.image.starts_with(out) {
             check_inside(dataset, &raw.image, "image", &raw.source)?;
             if let Some(depth) = &raw.depth {
                 check_inside(dataset, depth, "depth", &raw.source)?;
@@ -114,13 +121,10 @@ pub(crate) fn build_scene(
             w[1].source, w[1].name
         )));
     }
-    preflight(dataset, &data.views, settings)?;
+    preflight(dataset, out, &data.views, settings)?;
     let declared = data.views.iter().all(|v| v.split.is_some());
-    let hold = match settings.hold {
-        0 => data.hold_marker.unwrap_or(8),
-        h => h,
-    };
-    let use_declared = settings.hold == 0 && declared;
+    let hold = settings.hold.or(data.hold_marker).unwrap_or(8);
+    let use_declared = settings.hold.is_none() && declared;
     let n = data.views.len() as u64;
     let mut scene = Scene::default();
     for (i, raw) in data.views.iter().enumerate() {
@@ -141,40 +145,44 @@ pub(crate) fn build_scene(
                 raw.size.1
             )));
         }
-        let (image, size) = if settings.downscale <= 1 {
-            (absolute(&raw.image), full)
-        } else if let Some(pre) = prescaled_path(dataset, &raw.image, settings.downscale) {
-            let size = image_size(&pre).map_err(input_error)?;
-            let want = downscaled_size(full.0, full.1, settings.downscale);
-            if size.0.abs_diff(want.0) > 1 || size.1.abs_diff(want.1) > 1 {
-                return Err(StageError::Input(format!(
-                    "{}: image is {}×{}, expected about {}×{} ({}×{} shrunk by {})",
-                    pre.display(),
-                    size.0,
-                    size.1,
-                    want.0,
-                    want.1,
-                    full.0,
-                    full.1,
-                    settings.downscale
-                )));
-            }
-            (absolute(&pre), size)
-        } else {
-            let rel = format!(
-                "images/{}.png",
-                raw.name
-                    .replace(['/', '\\'], "_")
-                    .rsplit_once('.')
-                    .map_or(raw.name.as_str(), |(stem, _)| stem)
-            );
-            let dst = out.join(&rel);
-            std::fs::create_dir_all(out.join("images"))
-                .map_err(|e| StageError::io(out.join("images"), e))?;
-            let size =
-                write_downscaled(&raw.image, &dst, settings.downscale).map_err(input_error)?;
-            (rel, size)
-        };
+        let (image, size) =
+            if let (1, Ok(inside)) = (settings.downscale, raw.image.strip_prefix(out)) {
+                // Relative: the output folder is renamed into place when the stage commits.
+                (inside.to_string_lossy().into_owned(), full)
+            } else if settings.downscale <= 1 {
+                (absolute(&raw.image), full)
+            } else if let Some(pre) = prescaled_path(dataset, &raw.image, settings.downscale) {
+                let size = image_size(&pre).map_err(input_error)?;
+                let want = downscaled_size(full.0, full.1, settings.downscale);
+                if size.0.abs_diff(want.0) > 1 || size.1.abs_diff(want.1) > 1 {
+                    return Err(StageError::Input(format!(
+                        "{}: image is {}×{}, expected about {}×{} ({}×{} shrunk by {})",
+                        pre.display(),
+                        size.0,
+                        size.1,
+                        want.0,
+                        want.1,
+                        full.0,
+                        full.1,
+                        settings.downscale
+                    )));
+                }
+                (absolute(&pre), size)
+            } else {
+                let rel = format!(
+                    "images/{}.png",
+                    raw.name
+                        .replace(['/', '\\'], "_")
+                        .rsplit_once('.')
+                        .map_or(raw.name.as_str(), |(stem, _)| stem)
+                );
+                let dst = out.join(&rel);
+                std::fs::create_dir_all(out.join("images"))
+                    .map_err(|e| StageError::io(out.join("images"), e))?;
+                let size =
+                    write_downscaled(&raw.image, &dst, settings.downscale).map_err(input_error)?;
+                (rel, size)
+            };
         // Pixel-corner convention: scaling the image scales every intrinsic by the same ratio.
         let (sx, sy) = (
             f64::from(size.0) / f64::from(full.0),
@@ -204,7 +212,7 @@ pub(crate) fn build_scene(
         };
         let split = match (use_declared, raw.split) {
             (true, Some(s)) => s,
-            // A `hold=0` marker (BAD-Gaussians) means every view trains.
+            // hold 0 (the option or a BAD-Gaussians marker): every view trains.
             _ if hold > 0 && (i as u32).is_multiple_of(hold) => Split::Test,
             _ => Split::Train,
         };
@@ -243,14 +251,18 @@ pub(crate) fn build_scene(
     scene.save(out)?;
     let test = scene.views_in(Split::Test).count();
     if test == 0 {
-        // Any hold > 0 makes view 0 a test view, so only these two leave none.
+        // Any hold > 0 makes view 0 a test view, so only these leave none.
         let why = if use_declared {
             "the dataset's own split puts every view in train"
+        } else if settings.hold == Some(0) {
+            "--hold 0 puts every view in train"
         } else {
             "its hold=0 marker means every view trains"
         };
         ctx.warn(&format!(
-            "{}: the scene has no test views ({why}); score it with `cocog eval --split train`",
+            "{}: the scene has no test views ({why}); train, render and export work, but \
+             `cocog eval` has nothing held out to score: ingest with --hold 8 to keep every \
+             8th view for testing, or score the training views with `cocog eval --split train`",
             dataset.display()
         ));
     }

@@ -3,12 +3,14 @@
 //! - `ingest-colmap`: `sparse/N/{cameras,images,points3D}.{bin,txt}` + `images/`.
 //! - `ingest-llff`: `poses_bounds.npy` + `images/` (points from `sparse/` when present).
 //! - `ingest-nerf`: `transforms.json` (or Blender's `transforms_{train,test}.json`).
+//! - `ingest-photos`: a folder of photos, posed by running COLMAP (see [`photos`]).
 //!
 //! Options: `downscale` shrinks images by an integer factor (using `images_N/` when the dataset
 //! has it, else resampling into the scene's `images/`); `hold` chooses the test split: test views
-//! are those whose index in name order is a multiple of `hold`. `hold = 0` (the default) means
-//! "as the dataset says": per-frame splits of transforms.json, else the `hold=N` marker file,
-//! else 8; a `hold=0` marker (BAD-Gaussians) trains on every view, with a warning. Image paths
+//! are those whose index in name order is a multiple of `hold`, and `hold = 0` trains on every
+//! view. Unset, the dataset decides: per-frame splits of transforms.json, else the `hold=N`
+//! marker file, else 8; a `hold=0` marker (BAD-Gaussians) trains on every view. A scene without
+//! test views gets a warning that says how to make some. Image paths
 //! that lead outside the dataset folder are refused unless `allow-outside` is set. A dataset
 //! without SfM points (LLFF without `sparse/`, transforms.json) starts from 100k random points:
 //! in the train frusta between the near/far bounds when known, else in INRIA's cube of side 2.6.
@@ -17,6 +19,7 @@
 mod build;
 mod fallback;
 mod paths;
+mod photos;
 mod readers;
 
 use cocog_formats::FormatError;
@@ -40,6 +43,7 @@ enum Layout {
     Colmap,
     Llff,
     Nerf,
+    Photos,
 }
 
 struct Ingest(Layout);
@@ -51,10 +55,11 @@ fn common_options() -> Vec<OptionSpec> {
             1,
             "shrink images by this integer factor (uses images_N/ when present)",
         ),
-        OptionSpec::int(
+        OptionSpec::optional(
             "hold",
-            0,
-            "test views are every hold-th view in name order; 0 = the dataset's split, else its hold=N marker, else 8",
+            OptionKind::Int,
+            "test views are every hold-th view in name order; 0 = no test views (every view \
+             trains); default: the dataset's split, else its hold=N marker, else 8",
         ),
         OptionSpec::bool(
             "allow-outside",
@@ -79,8 +84,16 @@ impl Stage for Ingest {
                 "ingest-nerf",
                 "Read a NeRF dataset (transforms.json) into a scene",
             ),
+            Layout::Photos => (
+                "ingest-photos",
+                "Run COLMAP on a folder of photos (or a dataset's images/) and read the \
+                 result into a scene",
+            ),
         };
         let mut options = common_options();
+        if matches!(self.0, Layout::Photos) {
+            options.extend(photos::options());
+        }
         if matches!(self.0, Layout::Colmap) {
             options.push(OptionSpec::optional(
                 "model",
@@ -114,7 +127,7 @@ impl Stage for Ingest {
         };
         let settings = Settings {
             downscale: int("downscale", 1)?.unwrap_or(1),
-            hold: int("hold", 0)?.unwrap_or(0),
+            hold: int("hold", 0)?,
             allow_outside: match req.options.get("allow-outside") {
                 None | Some(Value::Null) => false,
                 Some(v) => v.as_bool().ok_or_else(|| {
@@ -135,6 +148,7 @@ impl Stage for Ingest {
             Layout::Colmap => readers::read_colmap(dataset, int("model", 0)?)?,
             Layout::Llff => readers::read_llff(dataset)?,
             Layout::Nerf => readers::read_nerf(dataset)?,
+            Layout::Photos => return photos::run(req, &settings, ctx),
         };
         let (scene, summary) = build_scene(dataset, data, &settings, &req.output, ctx)?;
         ctx.info(&format!(
@@ -152,5 +166,6 @@ pub fn stages() -> Vec<Box<dyn Stage>> {
         Box::new(Ingest(Layout::Colmap)),
         Box::new(Ingest(Layout::Llff)),
         Box::new(Ingest(Layout::Nerf)),
+        Box::new(Ingest(Layout::Photos)),
     ]
 }

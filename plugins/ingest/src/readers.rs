@@ -74,13 +74,24 @@ pub(crate) fn read_colmap(
     let dir = colmap::find_model_dir(dataset, model_index).map_err(input_error)?;
     let model = colmap::read_model(&dir).map_err(input_error)?;
     let images = image_dir(dataset)?;
+    from_colmap_model(&model, &dir, &images, dataset)
+}
+
+/// The views and points of a COLMAP model read from `dir`, photos in `images`, the `hold=N`
+/// marker looked up in `dataset`.
+pub(crate) fn from_colmap_model(
+    model: &Model,
+    dir: &Path,
+    images: &Path,
+    dataset: &Path,
+) -> Result<Ingested, StageError> {
     let views = model
         .images
         .iter()
         .map(|img| {
             let source = format!(
                 "{}: image {} ({:?})",
-                colmap::model_file(&dir, "images").display(),
+                colmap::model_file(dir, "images").display(),
                 img.id,
                 img.name
             );
@@ -90,7 +101,7 @@ pub(crate) fn read_colmap(
             let intrinsics = cam.pinhole().map_err(|e| {
                 StageError::Input(format!(
                     "{}: camera {}: {e}",
-                    colmap::model_file(&dir, "cameras").display(),
+                    colmap::model_file(dir, "cameras").display(),
                     cam.id
                 ))
             })?;
@@ -111,8 +122,8 @@ pub(crate) fn read_colmap(
         })
         .collect::<Result<Vec<_>, StageError>>()?;
     Ok(Ingested {
-        bounds: bounds_from_model(&model),
-        points: Some(colmap_points(&model)),
+        bounds: bounds_from_model(model),
+        points: Some(colmap_points(model)),
         views,
         hold_marker: llff::read_hold_marker(dataset).map_err(input_error)?,
     })
