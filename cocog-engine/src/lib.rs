@@ -31,12 +31,14 @@
 //! ```
 //!
 //! Modules: `core` (device, buffers, dispatch), `prims` (Gaussian-agnostic kernels),
-//! `splat` (the rasterizer), `reference` (the f64 CPU oracle).
+//! `splat` (the rasterizer), `coc` (CoCoGaussian's MLP h_θ and CoC expansion), `reference`
+//! (the f64 CPU oracle).
 //!
 //! Conventions: OpenCV cameras (x right, y down, z forward) with `world_from_camera` poses;
 //! pixel (i, j) is centred at (i + 0.5, j + 0.5); parameters are laid out as in an INRIA PLY
 //! (see `GaussianParams`); `depth` output is Σ wᵢ·zᵢ, not divided by alpha.
 
+pub mod coc;
 pub mod core;
 mod error;
 pub mod prims;

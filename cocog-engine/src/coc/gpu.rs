@@ -1,0 +1,289 @@
+//! Recording h_θ, the expansion and their adjoint into a training step (see the WGSL files).
+//! Every per-step buffer comes from the caller's `Workspace`.
+
+use super::layout::{CAMERA_FREQS, CocConfig, CocVariant, INPUT_DIM, MEAN_FREQS};
+use crate::core::{GpuBuffer, GpuContext, Kernel, Recorder, Workspace, shader};
+
+/// Gaussians per partial sum of the weight gradients: enough work per thread to amortise the
+/// second pass, few enough partials to keep their buffer small (N/1024 × parameters).
+const CHUNK: u32 = 1024;
+
+/// What changes per step: the view and its camera centre.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CocStep {
+    /// Index of the training view, into the focus buffer.
+    pub view: u32,
+    pub camera_centre: [f32; 3],
+    /// The focus buffer holds d_F / focus_scale (the released code learns d_F / max depth).
+    pub focus_scale: f32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct StepUniform {
+    n: u32,
+    view: u32,
+    focus_scale: f32,
+    chunks: u32,
+    centre: [f32; 3],
+    pad: u32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Sizes {
+    len: u32,
+    sets: u32,
+    pad: [u32; 2],
+}
+
+/// The M + 1 sets of a step, `[set][base]`, plus what the backward replays.
+#[derive(Debug)]
+pub struct CocExpansion {
+    pub means: GpuBuffer,
+    pub log_scales: GpuBuffer,
+    pub quats: GpuBuffer,
+    /// Per Gaussian: h_θ's input, hidden activations and heads.
+    pub acts: GpuBuffer,
+    /// Per Gaussian: the gate |1/d − 1/d_F| and its derivative in the focus parameter.
+    pub gates: GpuBuffer,
+    pub num_gaussians: u32,
+}
+
+/// Gradients of the base Gaussians' means, log-scales and rotations (summed over the sets),
+/// of h_θ's weights, and of the focus buffer (non-zero at the step's view only).
+#[derive(Debug)]
+pub struct CocGrads {
+    pub v_means: GpuBuffer,
+    pub v_log_scales: GpuBuffer,
+    pub v_quats: GpuBuffer,
+    pub v_weights: GpuBuffer,
+    pub v_focus: GpuBuffer,
+}
+
+/// The compiled CoC kernels for one `CocConfig`.
+#[derive(Debug)]
+pub struct CocKernels {
+    config: CocConfig,
+    forward: Kernel,
+    backward: Kernel,
+    partials: Kernel,
+    weight_sum: Kernel,
+    focus_sum: Kernel,
+    sum_sets: Kernel,
+}
+
+/// WGSL constants of this configuration, prepended to every CoC shader.
+fn prelude(config: &CocConfig) -> String {
+    let hl = config.heads();
+    let ml = config.mlp();
+    let width = ml.width;
+    let mut s = format!(
+        "const M: u32 = {m}u;\nconst WIDTH: u32 = {width}u;\nconst HEADS: u32 = {heads}u;\n\
+         const PAPER: bool = {paper};\nconst H_APERTURE: u32 = {ha}u;\nconst H_BETA: u32 = {hb}u;\n\
+         const H_POS: u32 = {hp}u;\nconst H_SCALE: u32 = {hs}u;\nconst H_ROT: u32 = {hr}u;\n\
+         const IN_DIM: u32 = {INPUT_DIM}u;\nconst MEAN_FREQS: u32 = {MEAN_FREQS}u;\n\
+         const CAMERA_FREQS: u32 = {CAMERA_FREQS}u;\nconst MAXD: u32 = {maxd}u;\n\
+         const ACT_STRIDE: u32 = {acts}u;\nconst DELTA_STRIDE: u32 = {deltas}u;\n\
+         const P_TOTAL: u32 = {p}u;\nconst CHUNK: u32 = {CHUNK}u;\n",
+        m = hl.copies,
+        heads = hl.len,
+        paper = config.variant == CocVariant::Paper,
+        ha = hl.aperture.unwrap_or(0),
+        hb = hl.beta.unwrap_or(0),
+        hp = hl.pos,
+        hs = hl.scale,
+        hr = hl.rot,
+        maxd = INPUT_DIM.max(width).max(hl.len),
+        acts = INPUT_DIM + 3 * width + hl.len,
+        deltas = 3 * width + hl.len,
+        p = ml.len,
+    );
+    for (l, (fan_in, fan_out, w, b)) in ml.layers.iter().enumerate() {
+        s += &format!(
+            "const L{l}_IN: u32 = {fan_in}u;\nconst L{l}_OUT: u32 = {fan_out}u;\n\
+             const L{l}_W: u32 = {w}u;\nconst L{l}_B: u32 = {b}u;\n"
+        );
+    }
+    s + include_str!("common.wgsl")
+}
+
+impl CocKernels {
+    pub fn new(ctx: &GpuContext, config: CocConfig) -> Self {
+        let pre = prelude(&config);
+        let module = |name: &str, body: &str| shader(ctx, name, &format!("{pre}\n{body}"));
+        let fwd = module("coc forward", include_str!("forward.wgsl"));
+        let bwd = module("coc backward", include_str!("backward.wgsl"));
+        let red = module("coc reduce", include_str!("reduce.wgsl"));
+        let sets = shader(ctx, "coc sum sets", include_str!("sum_sets.wgsl"));
+        Self {
+            config,
+            forward: Kernel::new(ctx, &fwd, "forward"),
+            backward: Kernel::new(ctx, &bwd, "backward"),
+            partials: Kernel::new(ctx, &red, "weight_partials"),
+            weight_sum: Kernel::new(ctx, &red, "weight_sum"),
+            focus_sum: Kernel::new(ctx, &red, "focus_sum"),
+            sum_sets: Kernel::new(ctx, &sets, "sum_sets"),
+        }
+    }
+
+    pub fn config(&self) -> &CocConfig {
+        &self.config
+    }
+
+    fn uniform(&self, rec: &mut Recorder, n: u32, step: &CocStep) -> crate::core::UniformSlot {
+        rec.uniform(&StepUniform {
+            n,
+            view: step.view,
+            focus_scale: step.focus_scale,
+            chunks: n.div_ceil(CHUNK),
+            centre: step.camera_centre,
+            pad: 0,
+        })
+    }
+
+    /// Records h_θ and the expansion of `n` base Gaussians for one view. `focus` holds one
+    /// value per training view.
+    pub fn encode_forward(
+        &self,
+        rec: &mut Recorder,
+        ws: &mut Workspace,
+        weights: &wgpu::Buffer,
+        means: &wgpu::Buffer,
+        log_scales: &wgpu::Buffer,
+        quats: &wgpu::Buffer,
+        focus: &wgpu::Buffer,
+        n: u32,
+        step: &CocStep,
+    ) -> CocExpansion {
+        let ctx = rec.ctx();
+        let sets = u64::from(self.config.copies + 1) * u64::from(n);
+        let hl = self.config.heads();
+        let stride = INPUT_DIM + 3 * self.config.width as usize + hl.len;
+        let out = CocExpansion {
+            means: ws.buffer(ctx, "coc set means", sets * 12),
+            log_scales: ws.buffer(ctx, "coc set log-scales", sets * 12),
+            quats: ws.buffer(ctx, "coc set quats", sets * 16),
+            acts: ws.buffer(ctx, "coc acts", u64::from(n) * stride as u64 * 4),
+            gates: ws.buffer(ctx, "coc gates", u64::from(n) * 8),
+            num_gaussians: n,
+        };
+        if n == 0 {
+            return out;
+        }
+        let u = self.uniform(rec, n, step);
+        self.forward.dispatch_1d(
+            rec,
+            &[
+                (0, &u),
+                (1, weights),
+                (2, means),
+                (3, log_scales),
+                (4, quats),
+                (5, focus),
+                (6, &out.acts),
+                (7, &out.means),
+                (8, &out.log_scales),
+                (9, &out.quats),
+                (10, &out.gates),
+            ],
+            n.div_ceil(64),
+        );
+        out
+    }
+
+    /// Records the adjoint: `v_set_*` are the rasterizer's gradients of the expanded sets.
+    pub fn encode_backward(
+        &self,
+        rec: &mut Recorder,
+        ws: &mut Workspace,
+        weights: &wgpu::Buffer,
+        quats: &wgpu::Buffer,
+        exp: &CocExpansion,
+        v_set_means: &wgpu::Buffer,
+        v_set_log_scales: &wgpu::Buffer,
+        v_set_quats: &wgpu::Buffer,
+        num_views: u32,
+        step: &CocStep,
+    ) -> CocGrads {
+        let ctx = rec.ctx();
+        let n = exp.num_gaussians;
+        let width = self.config.width as usize;
+        let hl = self.config.heads();
+        let params = self.config.mlp().len as u32;
+        let chunks = n.div_ceil(CHUNK);
+        let grads = CocGrads {
+            v_means: ws.buffer(ctx, "coc v means", u64::from(n) * 12),
+            v_log_scales: ws.buffer(ctx, "coc v log-scales", u64::from(n) * 12),
+            v_quats: ws.buffer(ctx, "coc v quats", u64::from(n) * 16),
+            v_weights: ws.zeroed(rec, "coc v weights", u64::from(params) * 4),
+            v_focus: ws.zeroed(rec, "coc v focus", u64::from(num_views) * 4),
+        };
+        if n == 0 {
+            return grads;
+        }
+        let deltas = ws.buffer(
+            ctx,
+            "coc deltas",
+            u64::from(n) * (3 * width + hl.len) as u64 * 4,
+        );
+        let terms = ws.buffer(ctx, "coc focus terms", u64::from(n) * 4);
+        let partials = ws.buffer(
+            ctx,
+            "coc weight partials",
+            u64::from(chunks) * u64::from(params) * 4,
+        );
+        let u = self.uniform(rec, n, step);
+        self.backward.dispatch_1d(
+            rec,
+            &[
+                (0, &u),
+                (1, weights),
+                (2, quats),
+                (3, &exp.acts),
+                (4, &exp.gates),
+                (5, v_set_means),
+                (6, v_set_log_scales),
+                (7, v_set_quats),
+                (8, &grads.v_means),
+                (9, &grads.v_log_scales),
+                (10, &grads.v_quats),
+                (11, &deltas),
+                (12, &terms),
+            ],
+            n.div_ceil(64),
+        );
+        let groups = params.div_ceil(256);
+        self.partials.dispatch(
+            rec,
+            &[(0, &u), (1, &exp.acts), (2, &deltas), (3, &partials)],
+            [groups, chunks, 1],
+        );
+        self.weight_sum.dispatch(
+            rec,
+            &[(0, &u), (3, &partials), (4, &grads.v_weights)],
+            [groups, 1, 1],
+        );
+        self.focus_sum
+            .dispatch(rec, &[(0, &u), (5, &terms), (6, &grads.v_focus)], [1, 1, 1]);
+        grads
+    }
+
+    /// `dst[j] = Σ_set src[set·len + j]` over the M + 1 sets (opacity and SH gradients, which
+    /// the sets share with their base).
+    pub fn encode_sum_sets(
+        &self,
+        rec: &mut Recorder,
+        src: &wgpu::Buffer,
+        dst: &wgpu::Buffer,
+        len: u32,
+    ) {
+        let sizes = rec.uniform(&Sizes {
+            len,
+            sets: self.config.copies + 1,
+            pad: [0; 2],
+        });
+        self.sum_sets
+            .dispatch_1d(rec, &[(0, &sizes), (1, src), (2, dst)], len.div_ceil(256));
+    }
+}

@@ -1,0 +1,264 @@
+//! The f64 reference of h_θ and the CoC expansion against central finite differences, per
+//! scalar: every weight and bias of every layer, every head of both variants, the base
+//! parameters through all M + 1 sets, and the focus distance through the gate.
+
+mod common;
+
+use cocog_engine::coc::reference::{
+    Base, Expanded, expand, expand_backward, gate, input, mlp_backward, mlp_forward, multiplier,
+};
+use cocog_engine::coc::{CocConfig, CocVariant, HeadLayout, MlpLayout, init_weights};
+use common::Rng;
+
+const STEP: f64 = 1e-6;
+
+/// A loss that weighs every output of every set differently, so no gradient hides in a sum.
+struct Probe {
+    coef: Vec<Expanded>,
+}
+
+impl Probe {
+    fn new(sets: usize, rng: &mut Rng) -> Self {
+        let mut r = || rng.range(-1.0, 1.0);
+        let coef = (0..sets)
+            .map(|_| Expanded {
+                mean: [r(), r(), r()],
+                log_scale: [r(), r(), r()],
+                quat: [r(), r(), r(), r()],
+            })
+            .collect();
+        Self { coef }
+    }
+
+    fn loss(&self, sets: &[Expanded]) -> f64 {
+        let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+        sets.iter()
+            .zip(&self.coef)
+            .map(|(s, c)| {
+                dot(&s.mean, &c.mean) + dot(&s.log_scale, &c.log_scale) + dot(&s.quat, &c.quat)
+            })
+            .sum()
+    }
+}
+
+struct Case {
+    variant: CocVariant,
+    hl: HeadLayout,
+    ml: MlpLayout,
+    weights: Vec<f64>,
+    base: Base,
+    camera: [f64; 3],
+    focus: f64,
+    probe: Probe,
+}
+
+impl Case {
+    fn new(variant: CocVariant, seed: u64) -> Self {
+        let mut config = CocConfig::new(variant);
+        config.width = 8;
+        let (hl, ml) = (config.heads(), config.mlp());
+        let mut weights: Vec<f64> = init_weights(&ml, seed)
+            .iter()
+            .map(|&v| f64::from(v))
+            .collect();
+        // Larger head weights spread the heads over the multiplier's clamped and open ranges.
+        let (_, fan_out, wo, bo) = ml.layers[3];
+        for v in &mut weights[wo..bo + fan_out] {
+            *v *= 3.0;
+        }
+        let mut rng = Rng::new(seed + 1);
+        let base = Base {
+            mean: [
+                rng.range(-0.3, 0.3),
+                rng.range(-0.3, 0.3),
+                rng.range(0.8, 1.2),
+            ],
+            log_scale: [
+                rng.range(-3.0, -1.0),
+                rng.range(-3.0, -1.0),
+                rng.range(-3.0, -1.0),
+            ],
+            quat: [
+                rng.range(0.5, 1.5),
+                rng.range(-0.5, 0.5),
+                rng.range(-0.5, 0.5),
+                rng.range(-0.5, 0.5),
+            ],
+        };
+        Self {
+            variant,
+            hl,
+            ml,
+            weights,
+            base,
+            camera: [0.05, -0.02, -0.1],
+            focus: 2.3,
+            probe: Probe::new(hl.copies + 1, &mut rng),
+        }
+    }
+
+    fn heads(&self, weights: &[f64]) -> Vec<f64> {
+        mlp_forward(&self.ml, weights, input(&self.base, self.camera)).heads
+    }
+
+    fn loss(&self, base: &Base, heads: &[f64], focus: f64) -> f64 {
+        let (c, _) = gate(self.base.mean, self.camera, focus);
+        self.probe
+            .loss(&expand(self.variant, &self.hl, base, heads, c))
+    }
+
+    /// Every analytic gradient: weights, heads, base (as one Expanded), focus.
+    fn analytic(&self) -> (Vec<f64>, Vec<f64>, Expanded, f64) {
+        let trace = mlp_forward(&self.ml, &self.weights, input(&self.base, self.camera));
+        let (c, dc_dfocus) = gate(self.base.mean, self.camera, self.focus);
+        let g = expand_backward(
+            self.variant,
+            &self.hl,
+            &self.base,
+            &trace.heads,
+            c,
+            &self.probe.coef,
+        );
+        let mut v_weights = vec![0.0; self.ml.len];
+        mlp_backward(&self.ml, &self.weights, &trace, &g.v_heads, &mut v_weights);
+        (v_weights, g.v_heads, g.base, g.v_gate * dc_dfocus)
+    }
+}
+
+fn central(f: impl Fn(f64) -> f64, x: f64) -> f64 {
+    (f(x + STEP) - f(x - STEP)) / (2.0 * STEP)
+}
+
+fn check(what: &str, analytic: f64, fd: f64) {
+    let tol = 1e-6 + 1e-5 * fd.abs();
+    assert!(
+        (analytic - fd).abs() <= tol,
+        "{what}: analytic {analytic:e} vs finite difference {fd:e}"
+    );
+}
+
+/// The case must exercise both the open and the clamped ranges of the multipliers, with no head
+/// so close to a clamp edge that a finite-difference step crosses it.
+fn assert_well_posed(case: &Case) {
+    let heads = case.heads(&case.weights);
+    let (c, _) = gate(case.base.mean, case.camera, case.focus);
+    let (e, top) = (std::f64::consts::E, 1.1f64.exp());
+    let (mut open, mut clamped) = (0, 0);
+    for &h in &heads[case.hl.scale..case.hl.len] {
+        let x = c * h + e - 0.01;
+        assert!(
+            (x - e).abs() > 1e-4 && (x - top).abs() > 1e-4,
+            "head {h} sits on a clamp edge"
+        );
+        if multiplier(c, h).1 > 0.0 {
+            open += 1
+        } else {
+            clamped += 1
+        }
+    }
+    assert!(open >= 4 && clamped >= 4, "open {open}, clamped {clamped}");
+}
+
+fn field<'a>(b: &'a mut Base, name: &str, k: usize) -> &'a mut f64 {
+    match name {
+        "mean" => &mut b.mean[k],
+        "log_scale" => &mut b.log_scale[k],
+        _ => &mut b.quat[k],
+    }
+}
+
+fn run(variant: CocVariant, seed: u64) {
+    let case = Case::new(variant, seed);
+    assert_well_posed(&case);
+    let heads = case.heads(&case.weights);
+    let (v_weights, v_heads, v_base, v_focus) = case.analytic();
+
+    for i in 0..case.ml.len {
+        let fd = central(
+            |x| {
+                let mut w = case.weights.clone();
+                w[i] = x;
+                case.loss(&case.base, &case.heads(&w), case.focus)
+            },
+            case.weights[i],
+        );
+        check(&format!("{} weight {i}", variant.name()), v_weights[i], fd);
+    }
+    for i in 0..case.hl.len {
+        let fd = central(
+            |x| {
+                let mut h = heads.clone();
+                h[i] = x;
+                case.loss(&case.base, &h, case.focus)
+            },
+            heads[i],
+        );
+        check(&format!("{} head {i}", variant.name()), v_heads[i], fd);
+    }
+    // The base enters the sets directly; h_θ's input and the gate see it detached.
+    let fields: [(&str, usize); 3] = [("mean", 3), ("log_scale", 3), ("quat", 4)];
+    for (name, len) in fields {
+        for k in 0..len {
+            let fd = central(
+                |x| {
+                    let mut b = case.base;
+                    *field(&mut b, name, k) = x;
+                    case.loss(&b, &heads, case.focus)
+                },
+                *field(&mut case.base.clone(), name, k),
+            );
+            let mut v = Base {
+                mean: v_base.mean,
+                log_scale: v_base.log_scale,
+                quat: v_base.quat,
+            };
+            let analytic = *field(&mut v, name, k);
+            check(
+                &format!("{} base {name}[{k}]", variant.name()),
+                analytic,
+                fd,
+            );
+        }
+    }
+    let fd = central(|f| case.loss(&case.base, &heads, f), case.focus);
+    check(&format!("{} focus distance", variant.name()), v_focus, fd);
+    assert!(
+        v_focus.abs() > 1e-3,
+        "the focus gradient must be exercised: {v_focus}"
+    );
+}
+
+#[test]
+fn code_variant_matches_finite_differences() {
+    run(CocVariant::Code, 11);
+}
+
+#[test]
+fn paper_variant_matches_finite_differences() {
+    run(CocVariant::Paper, 23);
+}
+
+/// In focus (d = d_F) the gate closes: copies coincide with the base, nothing is modulated.
+#[test]
+fn in_focus_gaussians_do_not_spread() {
+    for variant in [CocVariant::Code, CocVariant::Paper] {
+        let case = Case::new(variant, 5);
+        let d = (0..3)
+            .map(|k| (case.base.mean[k] - case.camera[k]).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        let (c, _) = gate(case.base.mean, case.camera, d);
+        assert!(c < 1e-12);
+        let sets = expand(variant, &case.hl, &case.base, &case.heads(&case.weights), c);
+        let n = case.base.quat.iter().map(|v| v * v).sum::<f64>().sqrt();
+        for s in sets {
+            for k in 0..3 {
+                assert!((s.mean[k] - case.base.mean[k]).abs() < 1e-9);
+                assert!((s.log_scale[k] - case.base.log_scale[k]).abs() < 1e-12);
+            }
+            for k in 0..4 {
+                assert!((s.quat[k] - case.base.quat[k] / n).abs() < 1e-12);
+            }
+        }
+    }
+}

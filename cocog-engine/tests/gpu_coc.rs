@@ -1,0 +1,329 @@
+//! The CoC kernels against the f64 reference, per scalar: h_θ's heads, the M + 1 expanded
+//! sets, the base gradients summed over the sets, every weight gradient of h_θ and the focus
+//! distance's gradient, for both variants at the real width (64) and more Gaussians than one
+//! weight-gradient chunk holds.
+
+mod common;
+
+use cocog_engine::coc::reference::{
+    Base, Expanded, MlpTrace, expand, expand_backward, gate, input, mlp_backward, mlp_forward,
+};
+use cocog_engine::coc::{CocConfig, CocKernels, CocStep, CocVariant, INPUT_DIM, init_weights};
+use cocog_engine::{GpuContext, Workspace, test_gpu};
+use common::Rng;
+
+/// More than one 1024-Gaussian chunk, not a multiple of the 64-wide workgroup.
+const N: usize = 1100;
+const VIEWS: usize = 3;
+const VIEW: u32 = 1;
+const CAMERA: [f64; 3] = [0.05, -0.02, -0.1];
+const FOCUS_SCALE: f64 = 2.0;
+
+struct Inputs {
+    bases: Vec<Base>,
+    weights: Vec<f32>,
+    focus: Vec<f32>,
+    /// Gradient of every expanded set, `[set][base]`.
+    v_sets: Vec<Expanded>,
+}
+
+fn inputs(config: &CocConfig, seed: u64) -> Inputs {
+    let mut rng = Rng::new(seed);
+    let mut weights = init_weights(&config.mlp(), seed);
+    // Spread the heads over the multipliers' clamped and open ranges.
+    let (_, fan_out, wo, bo) = config.mlp().layers[3];
+    for v in &mut weights[wo..bo + fan_out] {
+        *v *= 3.0;
+    }
+    // Values stored in f32 on the GPU: round them once so both sides start equal.
+    let mut r = |lo: f64, hi: f64| f64::from(rng.range_f32(lo, hi));
+    let bases = (0..N)
+        .map(|_| Base {
+            mean: [r(-0.5, 0.5), r(-0.4, 0.4), r(0.6, 3.5)],
+            log_scale: [r(-4.0, -1.0), r(-4.0, -1.0), r(-4.0, -1.0)],
+            quat: [r(0.3, 1.5), r(-0.6, 0.6), r(-0.6, 0.6), r(-0.6, 0.6)],
+        })
+        .collect();
+    let sets = (config.copies as usize + 1) * N;
+    let v_sets = (0..sets)
+        .map(|_| Expanded {
+            mean: [r(-1.0, 1.0), r(-1.0, 1.0), r(-1.0, 1.0)],
+            log_scale: [r(-1.0, 1.0), r(-1.0, 1.0), r(-1.0, 1.0)],
+            quat: [r(-1.0, 1.0), r(-1.0, 1.0), r(-1.0, 1.0), r(-1.0, 1.0)],
+        })
+        .collect();
+    Inputs {
+        bases,
+        weights,
+        focus: vec![0.9, 1.15, 1.4],
+        v_sets,
+    }
+}
+
+fn flat<const K: usize>(v: impl Iterator<Item = [f64; K]>) -> Vec<f32> {
+    v.flat_map(|a| a.map(|x| x as f32)).collect()
+}
+
+fn close(what: &str, gpu: f32, reference: f64, tol: f64) {
+    assert!(
+        (f64::from(gpu) - reference).abs() <= tol,
+        "{what}: GPU {gpu:e} vs reference {reference:e} (tolerance {tol:e})"
+    );
+}
+
+struct Gpu {
+    /// Per Gaussian: h_θ's input, hidden activations and heads, as the backward replays them.
+    acts: Vec<f32>,
+    sets: [Vec<f32>; 3],
+    v_base: [Vec<f32>; 3],
+    v_weights: Vec<f32>,
+    v_focus: Vec<f32>,
+}
+
+fn run_gpu(ctx: &GpuContext, config: CocConfig, inp: &Inputs) -> Gpu {
+    let kernels = CocKernels::new(ctx, config);
+    let means = ctx.storage_from("means", &flat(inp.bases.iter().map(|b| b.mean)));
+    let log_scales = ctx.storage_from("log-scales", &flat(inp.bases.iter().map(|b| b.log_scale)));
+    let quats = ctx.storage_from("quats", &flat(inp.bases.iter().map(|b| b.quat)));
+    let weights = ctx.storage_from("weights", &inp.weights);
+    let focus = ctx.storage_from("focus", &inp.focus);
+    let v_means = ctx.storage_from("v set means", &flat(inp.v_sets.iter().map(|v| v.mean)));
+    let v_ls = ctx.storage_from(
+        "v set log-scales",
+        &flat(inp.v_sets.iter().map(|v| v.log_scale)),
+    );
+    let v_quats = ctx.storage_from("v set quats", &flat(inp.v_sets.iter().map(|v| v.quat)));
+    let step = CocStep {
+        view: VIEW,
+        camera_centre: CAMERA.map(|v| v as f32),
+        focus_scale: FOCUS_SCALE as f32,
+    };
+    let mut ws = Workspace::default();
+    let mut rec = ctx.recorder();
+    let n = N as u32;
+    let exp = kernels.encode_forward(
+        &mut rec,
+        &mut ws,
+        &weights,
+        &means,
+        &log_scales,
+        &quats,
+        &focus,
+        n,
+        &step,
+    );
+    let g = kernels.encode_backward(
+        &mut rec,
+        &mut ws,
+        &weights,
+        &quats,
+        &exp,
+        &v_means,
+        &v_ls,
+        &v_quats,
+        VIEWS as u32,
+        &step,
+    );
+    rec.submit();
+    let sets = (config.copies as usize + 1) * N;
+    let read = |b: &wgpu::Buffer, len: usize| ctx.read::<f32>(b, len).unwrap();
+    let stride = INPUT_DIM + 3 * config.width as usize + config.heads().len;
+    let acts = read(&exp.acts, N * stride);
+    Gpu {
+        acts,
+        sets: [
+            read(&exp.means, 3 * sets),
+            read(&exp.log_scales, 3 * sets),
+            read(&exp.quats, 4 * sets),
+        ],
+        v_base: [
+            read(&g.v_means, 3 * N),
+            read(&g.v_log_scales, 3 * N),
+            read(&g.v_quats, 4 * N),
+        ],
+        v_weights: read(&g.v_weights, config.mlp().len),
+        v_focus: read(&g.v_focus, VIEWS),
+    }
+}
+
+fn gpu_trace(acts: &[f32], i: usize, config: &CocConfig) -> MlpTrace {
+    let (w, h) = (config.width as usize, config.heads().len);
+    let stride = INPUT_DIM + 3 * w + h;
+    let row: Vec<f64> = acts[i * stride..(i + 1) * stride]
+        .iter()
+        .map(|&v| f64::from(v))
+        .collect();
+    let at = |a: usize, len: usize| row[a..a + len].to_vec();
+    MlpTrace {
+        layers: [
+            at(0, INPUT_DIM),
+            at(INPUT_DIM, w),
+            at(INPUT_DIM + w, w),
+            at(INPUT_DIM + 2 * w, w),
+        ],
+        heads: at(INPUT_DIM + 3 * w, h),
+    }
+}
+
+fn check(variant: CocVariant, seed: u64) {
+    let Some(ctx) = test_gpu() else { return };
+    let config = CocConfig::new(variant);
+    let inp = inputs(&config, seed);
+    let gpu = run_gpu(ctx, config, &inp);
+    let (hl, ml) = (config.heads(), config.mlp());
+    let w64: Vec<f64> = inp.weights.iter().map(|&v| f64::from(v)).collect();
+    let w_abs: Vec<f64> = w64.iter().map(|v| v.abs()).collect();
+    let focus = f64::from(inp.focus[VIEW as usize]) * FOCUS_SCALE;
+    let sets = hl.copies + 1;
+
+    let mut v_weights = vec![0.0; ml.len];
+    // Σ|terms| of every weight gradient: the same backward on absolute values bounds it, which
+    // gives each scalar an f32 rounding budget of its own.
+    let mut v_weights_bound = vec![0.0; ml.len];
+    let (mut v_focus, mut v_focus_bound) = (0.0, 0.0);
+    let mut open = 0;
+    for (i, base) in inp.bases.iter().enumerate() {
+        let want = mlp_forward(&ml, &w64, input(base, CAMERA));
+        // The GPU's own activations, checked here, drive the reference backward: an f32
+        // pre-activation that lands on the other side of zero than in f64 flips a ReLU mask,
+        // which is rounding, not a bug.
+        let trace = gpu_trace(&gpu.acts, i, &config);
+        for (l, (got, want)) in trace
+            .layers
+            .iter()
+            .chain([&trace.heads])
+            .zip(want.layers.iter().chain([&want.heads]))
+            .enumerate()
+        {
+            for (k, (&g, &w)) in got.iter().zip(want).enumerate() {
+                close(
+                    &format!("{} layer {l} value {k} of Gaussian {i}", variant.name()),
+                    g as f32,
+                    w,
+                    1e-4 * (1.0 + w.abs()),
+                );
+            }
+        }
+        let (c, dc) = gate(base.mean, CAMERA, focus);
+        let expanded = expand(variant, &hl, base, &want.heads, c);
+        for (m, e) in expanded.iter().enumerate() {
+            let o = m * inp.bases.len() + i;
+            for k in 0..3 {
+                close(
+                    "set mean",
+                    gpu.sets[0][3 * o + k],
+                    e.mean[k],
+                    1e-5 * (1.0 + e.mean[k].abs()),
+                );
+                close(
+                    "set log-scale",
+                    gpu.sets[1][3 * o + k],
+                    e.log_scale[k],
+                    1e-5 * (1.0 + e.log_scale[k].abs()),
+                );
+            }
+            for k in 0..4 {
+                close("set quat", gpu.sets[2][4 * o + k], e.quat[k], 1e-5);
+            }
+        }
+        let v: Vec<Expanded> = (0..sets).map(|m| inp.v_sets[m * N + i]).collect();
+        let g = expand_backward(variant, &hl, base, &trace.heads, c, &v);
+        open += g.v_heads.iter().filter(|v| **v != 0.0).count();
+        for k in 0..3 {
+            close(
+                "v base mean",
+                gpu.v_base[0][3 * i + k],
+                g.base.mean[k],
+                1e-5 * sets as f64,
+            );
+            close(
+                "v base log-scale",
+                gpu.v_base[1][3 * i + k],
+                g.base.log_scale[k],
+                1e-5 * sets as f64,
+            );
+        }
+        for k in 0..4 {
+            close(
+                "v base quat",
+                gpu.v_base[2][4 * i + k],
+                g.base.quat[k],
+                1e-4 * (1.0 + g.base.quat[k].abs()),
+            );
+        }
+        // The focus buffer holds d_F / FOCUS_SCALE: its gradient is FOCUS_SCALE × d loss / d d_F.
+        v_focus += g.v_gate * dc * FOCUS_SCALE;
+        v_focus_bound += (g.v_gate * dc * FOCUS_SCALE).abs();
+        mlp_backward(&ml, &w64, &trace, &g.v_heads, &mut v_weights);
+        let abs_trace = MlpTrace {
+            layers: trace
+                .layers
+                .clone()
+                .map(|l| l.iter().map(|v| v.abs()).collect()),
+            heads: trace.heads.clone(),
+        };
+        let abs_heads: Vec<f64> = g.v_heads.iter().map(|v| v.abs()).collect();
+        mlp_backward(&ml, &w_abs, &abs_trace, &abs_heads, &mut v_weights_bound);
+    }
+    assert!(
+        open > N,
+        "too few open multipliers ({open}) to test their gradients"
+    );
+    for p in 0..ml.len {
+        let tol = 1e-7 + 2e-5 * v_weights_bound[p];
+        close(
+            &format!("{} v weight {p}", variant.name()),
+            gpu.v_weights[p],
+            v_weights[p],
+            tol,
+        );
+    }
+    close(
+        "v focus",
+        gpu.v_focus[VIEW as usize],
+        v_focus,
+        1e-6 + 2e-5 * v_focus_bound,
+    );
+    assert!(
+        v_focus.abs() > 1e-3 * v_focus_bound,
+        "focus gradient must not cancel out"
+    );
+    for (view, v) in gpu.v_focus.iter().enumerate() {
+        if view != VIEW as usize {
+            assert_eq!(*v, 0.0, "only the step's view gets a focus gradient");
+        }
+    }
+}
+
+#[test]
+fn code_variant_matches_the_reference() {
+    check(CocVariant::Code, 3);
+}
+
+#[test]
+fn paper_variant_matches_the_reference() {
+    check(CocVariant::Paper, 4);
+}
+
+/// Opacity and SH gradients of the sets sum into their base.
+#[test]
+fn per_set_gradients_sum_into_the_base() {
+    let Some(ctx) = test_gpu() else { return };
+    let config = CocConfig::new(CocVariant::Code);
+    let kernels = CocKernels::new(ctx, config);
+    let len = 300u32;
+    let sets = config.copies + 1;
+    let src: Vec<f32> = (0..len * sets)
+        .map(|i| ((i * 37) % 101) as f32 * 0.01 - 0.5)
+        .collect();
+    let a = ctx.storage_from("src", &src);
+    let b = ctx.storage("dst", u64::from(len) * 4);
+    let mut rec = ctx.recorder();
+    kernels.encode_sum_sets(&mut rec, &a, &b, len);
+    rec.submit();
+    let got: Vec<f32> = ctx.read(&b, len as usize).unwrap();
+    for j in 0..len as usize {
+        let want: f32 = (0..sets as usize).map(|m| src[m * len as usize + j]).sum();
+        assert!((got[j] - want).abs() < 1e-5, "{j}: {} vs {want}", got[j]);
+    }
+}
