@@ -31,8 +31,8 @@
 //! ```
 //!
 //! Modules: `core` (device, buffers, dispatch), `prims` (Gaussian-agnostic kernels),
-//! `splat` (the rasterizer), `coc` (CoCoGaussian's MLP h_θ and CoC expansion), `reference`
-//! (the f64 CPU oracle).
+//! `splat` (the rasterizer), `coc` (CoCoGaussian's MLP h_θ and CoC expansion), `nn` (its
+//! image-space compositor F), `reference` (the f64 CPU oracle).
 //!
 //! Conventions: OpenCV cameras (x right, y down, z forward) with `world_from_camera` poses;
 //! pixel (i, j) is centred at (i + 0.5, j + 0.5); parameters are laid out as in an INRIA PLY
@@ -41,6 +41,7 @@
 pub mod coc;
 pub mod core;
 mod error;
+pub mod nn;
 pub mod prims;
 pub mod reference;
 pub mod splat;

@@ -1,0 +1,394 @@
+//! Recording F and the compositing into a training step (see conv.wgsl, norm.wgsl,
+//! blend.wgsl). Every per-step buffer comes from the caller's `Workspace`.
+
+use super::layout::{CompositorConfig, CompositorLayout, IN_EPS};
+use crate::core::{Bind, GpuBuffer, GpuContext, Kernel, Recorder, Workspace, shader};
+
+const NO_BIAS: u32 = u32::MAX;
+
+/// How the renders are weighted.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CompositeMode {
+    /// Equal weights: before F starts (method.md §5), or a plain mean at render time.
+    Uniform,
+    /// F's per-pixel softmax weights.
+    Learned,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct ConvU {
+    images: u32,
+    cin: u32,
+    cout: u32,
+    k: u32,
+    height: u32,
+    width: u32,
+    w_off: u32,
+    bias_off: u32,
+    rgba_input: u32,
+    pad: [u32; 3],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct NormU {
+    planes: u32,
+    size: u32,
+    eps: f32,
+    pad: u32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct BlendU {
+    images: u32,
+    pixels: u32,
+    uniform_weights: u32,
+    pad: u32,
+}
+
+/// A forward's results and what its backward replays.
+#[derive(Debug)]
+pub struct CompositeOutput {
+    /// The composite, rgba, one image.
+    pub blend: GpuBuffer,
+    /// Per render and pixel, its weight.
+    pub weights: GpuBuffer,
+    pub mode: CompositeMode,
+    width: u32,
+    height: u32,
+    images: u32,
+    /// Per layer: pre-activation, normalised output, statistics (learned mode only).
+    layers: Option<[(GpuBuffer, GpuBuffer, GpuBuffer); 2]>,
+}
+
+/// Gradients of the renders (rgba, the renders' layout) and of F's parameters (zero in
+/// uniform mode).
+#[derive(Debug)]
+pub struct CompositeGrads {
+    pub v_renders: GpuBuffer,
+    pub v_params: GpuBuffer,
+}
+
+#[derive(Debug)]
+pub struct Compositor {
+    config: CompositorConfig,
+    conv: Kernel,
+    conv_input: Kernel,
+    conv_weights: Kernel,
+    norm_stats: Kernel,
+    norm_apply: Kernel,
+    norm_grad_stats: Kernel,
+    norm_backward: Kernel,
+    blend: Kernel,
+    blend_backward: Kernel,
+}
+
+impl Compositor {
+    pub fn new(ctx: &GpuContext, config: CompositorConfig) -> Self {
+        let conv = shader(ctx, "compositor conv", include_str!("conv.wgsl"));
+        let norm = shader(ctx, "compositor norm", include_str!("norm.wgsl"));
+        let blend = shader(ctx, "compositor blend", include_str!("blend.wgsl"));
+        Self {
+            config,
+            conv: Kernel::new(ctx, &conv, "conv_forward"),
+            conv_input: Kernel::new(ctx, &conv, "conv_input_grad"),
+            conv_weights: Kernel::new(ctx, &conv, "conv_weight_grad"),
+            norm_stats: Kernel::new(ctx, &norm, "norm_stats"),
+            norm_apply: Kernel::new(ctx, &norm, "norm_apply"),
+            norm_grad_stats: Kernel::new(ctx, &norm, "norm_grad_stats"),
+            norm_backward: Kernel::new(ctx, &norm, "norm_backward"),
+            blend: Kernel::new(ctx, &blend, "blend_forward"),
+            blend_backward: Kernel::new(ctx, &blend, "blend_backward"),
+        }
+    }
+
+    pub fn layout(&self) -> CompositorLayout {
+        self.config.layout()
+    }
+
+    /// Fresh parameters (PyTorch's Conv2d initialisation), deterministic in `seed`.
+    pub fn init_params(&self, seed: u64) -> Vec<f32> {
+        self.layout().init(seed)
+    }
+
+    /// (in, out, kernel, weight offset, bias offset) of F's three convolutions.
+    fn convs(&self) -> [(u32, u32, u32, u32, u32); 3] {
+        let l = self.layout();
+        let c = l.channels as u32;
+        [
+            (3, c, 5, l.conv1_w as u32, l.conv1_b as u32),
+            (c, c, 3, l.conv2_w as u32, l.conv2_b as u32),
+            (c, 1, 3, l.head_w as u32, NO_BIAS),
+        ]
+    }
+
+    fn conv_uniform(
+        rec: &mut Recorder,
+        layer: (u32, u32, u32, u32, u32),
+        w: u32,
+        h: u32,
+        images: u32,
+        rgba: bool,
+    ) -> crate::core::UniformSlot {
+        let (cin, cout, k, w_off, bias_off) = layer;
+        rec.uniform(&ConvU {
+            images,
+            cin,
+            cout,
+            k,
+            height: h,
+            width: w,
+            w_off,
+            bias_off,
+            rgba_input: u32::from(rgba),
+            pad: [0; 3],
+        })
+    }
+
+    /// Records F (in learned mode) and the composite of `images` rgba renders of `w`×`h`.
+    pub fn encode_forward(
+        &self,
+        rec: &mut Recorder,
+        ws: &mut Workspace,
+        params: &wgpu::Buffer,
+        renders: &wgpu::Buffer,
+        w: u32,
+        h: u32,
+        images: u32,
+        mode: CompositeMode,
+    ) -> CompositeOutput {
+        let ctx = rec.ctx();
+        let pixels = u64::from(w * h);
+        let c = self.config.channels;
+        let maps = pixels * u64::from(images * c) * 4;
+        let blend = ws.buffer(ctx, "composite blend", pixels * 16);
+        let weights = ws.buffer(ctx, "composite weights", pixels * u64::from(images) * 4);
+        let logits = ws.buffer(ctx, "composite logits", pixels * u64::from(images) * 4);
+        let layers = (mode == CompositeMode::Learned).then(|| {
+            let [c1, c2, head] = self.convs();
+            let l1 = (
+                ws.buffer(ctx, "compositor z1", maps),
+                ws.buffer(ctx, "compositor y1", maps),
+                ws.buffer(ctx, "compositor stats1", u64::from(images * c) * 8),
+            );
+            let l2 = (
+                ws.buffer(ctx, "compositor z2", maps),
+                ws.buffer(ctx, "compositor y2", maps),
+                ws.buffer(ctx, "compositor stats2", u64::from(images * c) * 8),
+            );
+            self.conv_forward(rec, c1, params, renders, &l1.0, w, h, images, true);
+            self.relu_norm(rec, &l1, images * c, w * h);
+            self.conv_forward(rec, c2, params, &l1.1, &l2.0, w, h, images, false);
+            self.relu_norm(rec, &l2, images * c, w * h);
+            self.conv_forward(rec, head, params, &l2.1, &logits, w, h, images, false);
+            [l1, l2]
+        });
+        let u = rec.uniform(&BlendU {
+            images,
+            pixels: w * h,
+            uniform_weights: u32::from(mode == CompositeMode::Uniform),
+            pad: 0,
+        });
+        // Uniform mode reads no logits; the renders stand in for the binding.
+        let logits_in: &dyn Bind = if layers.is_some() { &logits } else { renders };
+        self.blend.dispatch_1d(
+            rec,
+            &[
+                (0, &u),
+                (1, renders),
+                (2, logits_in),
+                (3, &weights),
+                (4, &blend),
+            ],
+            (w * h).div_ceil(256),
+        );
+        CompositeOutput {
+            blend,
+            weights,
+            mode,
+            width: w,
+            height: h,
+            images,
+            layers,
+        }
+    }
+
+    fn conv_forward(
+        &self,
+        rec: &mut Recorder,
+        layer: (u32, u32, u32, u32, u32),
+        params: &wgpu::Buffer,
+        input: &wgpu::Buffer,
+        output: &wgpu::Buffer,
+        w: u32,
+        h: u32,
+        images: u32,
+        rgba: bool,
+    ) {
+        let u = Self::conv_uniform(rec, layer, w, h, images, rgba);
+        let total = images * layer.1 * w * h;
+        self.conv.dispatch_1d(
+            rec,
+            &[(0, &u), (1, params), (2, input), (3, output)],
+            total.div_ceil(256),
+        );
+    }
+
+    fn norm_uniform(rec: &mut Recorder, planes: u32, size: u32) -> crate::core::UniformSlot {
+        rec.uniform(&NormU {
+            planes,
+            size,
+            eps: IN_EPS as f32,
+            pad: 0,
+        })
+    }
+
+    fn relu_norm(
+        &self,
+        rec: &mut Recorder,
+        l: &(GpuBuffer, GpuBuffer, GpuBuffer),
+        planes: u32,
+        size: u32,
+    ) {
+        let u = Self::norm_uniform(rec, planes, size);
+        self.norm_stats
+            .dispatch_1d(rec, &[(0, &u), (1, &l.0), (3, &l.2)], planes);
+        self.norm_apply.dispatch_1d(
+            rec,
+            &[(0, &u), (1, &l.0), (2, &l.1), (3, &l.2)],
+            (planes * size).div_ceil(256),
+        );
+    }
+
+    /// Records the adjoint: the renders' gradient and (learned mode) F's parameter gradient.
+    pub fn encode_backward(
+        &self,
+        rec: &mut Recorder,
+        ws: &mut Workspace,
+        params: &wgpu::Buffer,
+        renders: &wgpu::Buffer,
+        out: &CompositeOutput,
+        v_blend: &wgpu::Buffer,
+    ) -> CompositeGrads {
+        let ctx = rec.ctx();
+        let (w, h, images) = (out.width, out.height, out.images);
+        let pixels = u64::from(w * h);
+        let c = self.config.channels;
+        let v_renders = ws.buffer(ctx, "composite v renders", pixels * u64::from(images) * 16);
+        let v_logits = ws.buffer(ctx, "composite v logits", pixels * u64::from(images) * 4);
+        let v_params = ws.zeroed(rec, "compositor v params", self.layout().len as u64 * 4);
+        let u = rec.uniform(&BlendU {
+            images,
+            pixels: w * h,
+            uniform_weights: u32::from(out.mode == CompositeMode::Uniform),
+            pad: 0,
+        });
+        self.blend_backward.dispatch_1d(
+            rec,
+            &[
+                (0, &u),
+                (1, renders),
+                (3, &out.weights),
+                (4, &out.blend),
+                (5, v_blend),
+                (6, &v_renders),
+                (7, &v_logits),
+            ],
+            (w * h).div_ceil(256),
+        );
+        if let Some([l1, l2]) = &out.layers {
+            let maps = pixels * u64::from(images * c) * 4;
+            let v_y = ws.buffer(ctx, "compositor v y", maps);
+            let v_z = ws.buffer(ctx, "compositor v z", maps);
+            let grad_stats = ws.buffer(ctx, "compositor grad stats", u64::from(images * c) * 8);
+            let [c1, c2, head] = self.convs();
+            // head: weights, then the gradient of its input y2.
+            self.weight_grads(rec, head, &l2.1, &v_logits, &v_params, w, h, images, false);
+            self.input_grads(rec, head, params, &v_logits, &v_y, w, h, images);
+            self.relu_norm_backward(rec, l2, &v_y, &v_z, &grad_stats, images * c, w * h);
+            self.weight_grads(rec, c2, &l1.1, &v_z, &v_params, w, h, images, false);
+            self.input_grads(rec, c2, params, &v_z, &v_y, w, h, images);
+            self.relu_norm_backward(rec, l1, &v_y, &v_z, &grad_stats, images * c, w * h);
+            self.weight_grads(rec, c1, renders, &v_z, &v_params, w, h, images, true);
+        }
+        CompositeGrads {
+            v_renders,
+            v_params,
+        }
+    }
+
+    fn weight_grads(
+        &self,
+        rec: &mut Recorder,
+        layer: (u32, u32, u32, u32, u32),
+        input: &wgpu::Buffer,
+        v_out: &wgpu::Buffer,
+        v_params: &wgpu::Buffer,
+        w: u32,
+        h: u32,
+        images: u32,
+        rgba: bool,
+    ) {
+        let u = Self::conv_uniform(rec, layer, w, h, images, rgba);
+        let (cin, cout, k, _, bias) = layer;
+        let count = cout * cin * k * k + if bias == NO_BIAS { 0 } else { cout };
+        self.conv_weights.dispatch_1d(
+            rec,
+            &[(0, &u), (2, input), (4, v_out), (6, v_params)],
+            count.div_ceil(256),
+        );
+    }
+
+    fn input_grads(
+        &self,
+        rec: &mut Recorder,
+        layer: (u32, u32, u32, u32, u32),
+        params: &wgpu::Buffer,
+        v_out: &wgpu::Buffer,
+        v_in: &wgpu::Buffer,
+        w: u32,
+        h: u32,
+        images: u32,
+    ) {
+        let u = Self::conv_uniform(rec, layer, w, h, images, false);
+        let total = images * layer.0 * w * h;
+        self.conv_input.dispatch_1d(
+            rec,
+            &[(0, &u), (1, params), (4, v_out), (5, v_in)],
+            total.div_ceil(256),
+        );
+    }
+
+    fn relu_norm_backward(
+        &self,
+        rec: &mut Recorder,
+        l: &(GpuBuffer, GpuBuffer, GpuBuffer),
+        v_y: &wgpu::Buffer,
+        v_z: &wgpu::Buffer,
+        grad_stats: &wgpu::Buffer,
+        planes: u32,
+        size: u32,
+    ) {
+        let u = Self::norm_uniform(rec, planes, size);
+        self.norm_grad_stats.dispatch_1d(
+            rec,
+            &[(0, &u), (2, &l.1), (4, v_y), (6, grad_stats)],
+            planes,
+        );
+        self.norm_backward.dispatch_1d(
+            rec,
+            &[
+                (0, &u),
+                (1, &l.0),
+                (2, &l.1),
+                (3, &l.2),
+                (4, v_y),
+                (5, v_z),
+                (6, grad_stats),
+            ],
+            (planes * size).div_ceil(256),
+        );
+    }
+}

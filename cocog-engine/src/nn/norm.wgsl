@@ -1,0 +1,111 @@
+// ReLU then InstanceNorm (no affine, biased variance, ε 1e-5) over each (image, channel) plane
+// of [image][channel][y][x] maps, and its adjoint. The statistics kernels run one workgroup
+// per plane; the element kernels one thread per value.
+
+struct Norm {
+    planes: u32,
+    // Values per plane (height × width).
+    size: u32,
+    eps: f32,
+    pad: u32,
+}
+
+@group(0) @binding(0) var<uniform> nm: Norm;
+// Pre-activation (the convolution's output).
+@group(0) @binding(1) var<storage, read> z: array<f32>;
+// Normalised output.
+@group(0) @binding(2) var<storage, read_write> y: array<f32>;
+// Per plane: mean, 1/σ.
+@group(0) @binding(3) var<storage, read_write> stats: array<f32>;
+@group(0) @binding(4) var<storage, read> v_y: array<f32>;
+@group(0) @binding(5) var<storage, read_write> v_z: array<f32>;
+// Per plane: mean(v_y), mean(v_y · y).
+@group(0) @binding(6) var<storage, read_write> grad_stats: array<f32>;
+
+var<workgroup> sums: array<vec2<f32>, 256>;
+
+fn reduce(lid: u32, v: vec2<f32>) -> vec2<f32> {
+    sums[lid] = v;
+    for (var w = 128u; w > 0u; w >>= 1u) {
+        workgroupBarrier();
+        if lid < w {
+            sums[lid] += sums[lid + w];
+        }
+    }
+    workgroupBarrier();
+    let total = sums[0];
+    workgroupBarrier();
+    return total;
+}
+
+fn plane_of(wg: vec3<u32>, nwg: vec3<u32>) -> u32 {
+    return wg.y * nwg.x + wg.x;
+}
+
+@compute @workgroup_size(256)
+fn norm_stats(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let plane = plane_of(wg, nwg);
+    if plane >= nm.planes {
+        return;
+    }
+    let base = plane * nm.size;
+    var s = 0.0;
+    for (var j = lid; j < nm.size; j += 256u) {
+        s += max(z[base + j], 0.0);
+    }
+    let mean = reduce(lid, vec2<f32>(s, 0.0)).x / f32(nm.size);
+    var q = 0.0;
+    for (var j = lid; j < nm.size; j += 256u) {
+        let d = max(z[base + j], 0.0) - mean;
+        q += d * d;
+    }
+    let var_ = reduce(lid, vec2<f32>(q, 0.0)).x / f32(nm.size);
+    if lid == 0u {
+        stats[2u * plane] = mean;
+        stats[2u * plane + 1u] = inverseSqrt(var_ + nm.eps);
+    }
+}
+
+@compute @workgroup_size(256)
+fn norm_apply(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let t = (wg.y * nwg.x + wg.x) * 256u + lid;
+    if t >= nm.planes * nm.size {
+        return;
+    }
+    let plane = t / nm.size;
+    y[t] = (max(z[t], 0.0) - stats[2u * plane]) * stats[2u * plane + 1u];
+}
+
+@compute @workgroup_size(256)
+fn norm_grad_stats(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let plane = plane_of(wg, nwg);
+    if plane >= nm.planes {
+        return;
+    }
+    let base = plane * nm.size;
+    var s = vec2<f32>(0.0);
+    for (var j = lid; j < nm.size; j += 256u) {
+        let g = v_y[base + j];
+        s += vec2<f32>(g, g * y[base + j]);
+    }
+    let total = reduce(lid, s) / f32(nm.size);
+    if lid == 0u {
+        grad_stats[2u * plane] = total.x;
+        grad_stats[2u * plane + 1u] = total.y;
+    }
+}
+
+// ∂/∂z = [z > 0] · (1/σ) · (v_y − mean(v_y) − y · mean(v_y · y)).
+@compute @workgroup_size(256)
+fn norm_backward(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let t = (wg.y * nwg.x + wg.x) * 256u + lid;
+    if t >= nm.planes * nm.size {
+        return;
+    }
+    let plane = t / nm.size;
+    var g = 0.0;
+    if z[t] > 0.0 {
+        g = stats[2u * plane + 1u] * (v_y[t] - grad_stats[2u * plane] - y[t] * grad_stats[2u * plane + 1u]);
+    }
+    v_z[t] = g;
+}

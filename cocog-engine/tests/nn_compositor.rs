@@ -1,0 +1,261 @@
+//! The compositor F and the softmax compositing: the f64 reference against central finite
+//! differences for every parameter of every layer and every render value, then the GPU against
+//! the reference per scalar, in both modes.
+
+mod common;
+
+use cocog_engine::nn::reference::{Maps, backward, composite, composite_backward, forward};
+use cocog_engine::nn::{CompositeMode, Compositor, CompositorConfig, CompositorLayout};
+use cocog_engine::{Workspace, test_gpu};
+use common::Rng;
+
+const STEP: f64 = 1e-6;
+
+fn random_maps(
+    rng: &mut Rng,
+    images: usize,
+    channels: usize,
+    h: usize,
+    w: usize,
+    lo: f64,
+    hi: f64,
+) -> Maps {
+    let mut m = Maps::zeros(images, channels, h, w);
+    for v in &mut m.data {
+        *v = rng.range(lo, hi);
+    }
+    m
+}
+
+/// Parameters with larger weights than PyTorch's default, so logits differ across renders by
+/// O(1) and the softmax weights are far from uniform; biases shifted so some ReLUs are off.
+fn params(layout: &CompositorLayout, rng: &mut Rng) -> Vec<f64> {
+    (0..layout.len)
+        .map(|i| {
+            let bias = (layout.conv1_b..layout.conv2_w).contains(&i)
+                || (layout.conv2_b..layout.head_w).contains(&i);
+            if bias {
+                rng.range(-0.3, 0.1)
+            } else {
+                rng.range(-0.5, 0.5)
+            }
+        })
+        .collect()
+}
+
+/// A loss with a distinct weight per composite value.
+fn probe(blend: &Maps, coef: &Maps) -> f64 {
+    blend.data.iter().zip(&coef.data).map(|(a, b)| a * b).sum()
+}
+
+fn check(what: &str, analytic: f64, fd: f64) {
+    assert!(
+        (analytic - fd).abs() <= 1e-6 + 1e-4 * fd.abs(),
+        "{what}: analytic {analytic:e} vs finite difference {fd:e}"
+    );
+}
+
+#[test]
+fn reference_matches_finite_differences() {
+    let mut rng = Rng::new(9);
+    let layout = CompositorLayout::new(4);
+    let (images, h, w) = (3, 7, 9);
+    let renders = random_maps(&mut rng, images, 3, h, w, 0.0, 1.0);
+    let coef = random_maps(&mut rng, 1, 3, h, w, -1.0, 1.0);
+    let p = params(&layout, &mut rng);
+    let t = forward(&layout, &p, &renders);
+    let b = backward(&layout, &p, &t, &coef);
+    let (v_renders, v_p) = (b.v_renders, b.v_params);
+    let spread = t.weights.data.iter().cloned().fold(0.0, f64::max);
+    assert!(
+        spread > 0.5,
+        "the softmax must be far from uniform: largest weight {spread}"
+    );
+
+    for i in 0..layout.len {
+        let f = |x: f64| {
+            let mut q = p.clone();
+            q[i] = x;
+            probe(&forward(&layout, &q, &renders).blend, &coef)
+        };
+        let fd = (f(p[i] + STEP) - f(p[i] - STEP)) / (2.0 * STEP);
+        check(&format!("parameter {i}"), v_p[i], fd);
+    }
+    // The renders' gradient goes through the product only (F's input is detached): hold the
+    // weights fixed while differencing the renders.
+    for i in 0..renders.data.len() {
+        let f = |x: f64| {
+            let mut r = renders.clone();
+            r.data[i] = x;
+            let (_, blend) = composite(&r, &logits_of(&t.weights));
+            probe(&blend, &coef)
+        };
+        let fd = (f(renders.data[i] + STEP) - f(renders.data[i] - STEP)) / (2.0 * STEP);
+        check(&format!("render value {i}"), v_renders.data[i], fd);
+    }
+}
+
+/// Logits that reproduce `weights` under the softmax (log of the weights).
+fn logits_of(weights: &Maps) -> Maps {
+    let mut l = weights.clone();
+    for v in &mut l.data {
+        *v = v.ln();
+    }
+    l
+}
+
+/// The compositing alone: softmax logits' gradient against finite differences.
+#[test]
+fn softmax_compositing_matches_finite_differences() {
+    let mut rng = Rng::new(4);
+    let (images, h, w) = (5, 3, 4);
+    let renders = random_maps(&mut rng, images, 3, h, w, 0.0, 1.0);
+    let logits = random_maps(&mut rng, images, 1, h, w, -2.0, 2.0);
+    let coef = random_maps(&mut rng, 1, 3, h, w, -1.0, 1.0);
+    let (weights, blend) = composite(&renders, &logits);
+    let (_, v_logits) = composite_backward(&renders, &weights, &blend, &coef);
+    for i in 0..logits.data.len() {
+        let f = |x: f64| {
+            let mut l = logits.clone();
+            l.data[i] = x;
+            probe(&composite(&renders, &l).1, &coef)
+        };
+        let fd = (f(logits.data[i] + STEP) - f(logits.data[i] - STEP)) / (2.0 * STEP);
+        check(&format!("logit {i}"), v_logits.data[i], fd);
+    }
+}
+
+fn to_rgba(m: &Maps) -> Vec<f32> {
+    let (n, h, w) = (m.images, m.height, m.width);
+    let mut out = vec![0.0f32; n * h * w * 4];
+    for i in 0..n {
+        for y in 0..h {
+            for x in 0..w {
+                for c in 0..3 {
+                    out[((i * h + y) * w + x) * 4 + c] = m.at(i, c, y, x) as f32;
+                }
+                out[((i * h + y) * w + x) * 4 + 3] = 1.0;
+            }
+        }
+    }
+    out
+}
+
+fn gpu_case(mode: CompositeMode, channels: usize, images: usize, h: usize, w: usize, seed: u64) {
+    let Some(ctx) = test_gpu() else { return };
+    let mut rng = Rng::new(seed);
+    let layout = CompositorLayout::new(channels);
+    // f32-representable inputs, so both sides start from the same numbers.
+    let round = |m: &mut Maps| m.data.iter_mut().for_each(|v| *v = f64::from(*v as f32));
+    let mut renders = random_maps(&mut rng, images, 3, h, w, 0.0, 1.0);
+    let mut coef = random_maps(&mut rng, 1, 3, h, w, -1.0, 1.0);
+    round(&mut renders);
+    round(&mut coef);
+    let p: Vec<f64> = params(&layout, &mut rng)
+        .iter()
+        .map(|v| f64::from(*v as f32))
+        .collect();
+
+    let comp = Compositor::new(ctx, CompositorConfig::with_channels(channels as u32));
+    let p32: Vec<f32> = p.iter().map(|v| *v as f32).collect();
+    let params_buf = ctx.storage_from("params", &p32);
+    let renders_buf = ctx.storage_from("renders", &to_rgba(&renders));
+    let v_blend_buf = ctx.storage_from("v blend", &to_rgba(&coef));
+    let mut ws = Workspace::default();
+    let mut rec = ctx.recorder();
+    let (wu, hu, nu) = (w as u32, h as u32, images as u32);
+    let out = comp.encode_forward(
+        &mut rec,
+        &mut ws,
+        &params_buf,
+        &renders_buf,
+        wu,
+        hu,
+        nu,
+        mode,
+    );
+    let g = comp.encode_backward(
+        &mut rec,
+        &mut ws,
+        &params_buf,
+        &renders_buf,
+        &out,
+        &v_blend_buf,
+    );
+    rec.submit();
+    let blend: Vec<f32> = ctx.read(&out.blend, h * w * 4).unwrap();
+    let v_renders: Vec<f32> = ctx.read(&g.v_renders, images * h * w * 4).unwrap();
+    let v_p: Vec<f32> = ctx.read(&g.v_params, layout.len).unwrap();
+
+    let (want_blend, want_v_renders, want_v_p, bounds) = match mode {
+        CompositeMode::Learned => {
+            let t = forward(&layout, &p, &renders);
+            let b = backward(&layout, &p, &t, &coef);
+            (t.blend, b.v_renders, b.v_params, b.bounds)
+        }
+        CompositeMode::Uniform => {
+            let zero = Maps::zeros(images, 1, h, w);
+            let (weights, blend) = composite(&renders, &zero);
+            let (vr, _) = composite_backward(&renders, &weights, &blend, &coef);
+            (blend, vr, vec![0.0; layout.len], vec![0.0; layout.len])
+        }
+    };
+    let close = |what: &str, got: f32, want: f64, tol: f64| {
+        assert!(
+            (f64::from(got) - want).abs() <= tol,
+            "{what}: GPU {got:e} vs reference {want:e}"
+        );
+    };
+    for y in 0..h {
+        for x in 0..w {
+            for c in 0..3 {
+                close(
+                    "blend",
+                    blend[(y * w + x) * 4 + c],
+                    want_blend.at(0, c, y, x),
+                    1e-5,
+                );
+            }
+            for i in 0..images {
+                for c in 0..3 {
+                    let got = v_renders[((i * h + y) * w + x) * 4 + c];
+                    close("v render", got, want_v_renders.at(i, c, y, x), 1e-5);
+                }
+            }
+        }
+    }
+    // Each parameter's own budget: f32 rounding of its final sum scales with Σ|term| (the
+    // reference reports it), and its inputs carry rounding from the layers above.
+    let mut checked = 0;
+    for (i, (&got, &want)) in v_p.iter().zip(&want_v_p).enumerate() {
+        close(
+            &format!("v param {i}"),
+            got,
+            want,
+            1e-4 * want.abs() + 2e-5 * bounds[i] + 1e-9,
+        );
+        checked += usize::from(want.abs() > 1e-3);
+    }
+    if mode == CompositeMode::Learned {
+        assert!(
+            checked > layout.len / 2,
+            "too few non-trivial gradients: {checked}"
+        );
+    }
+}
+
+#[test]
+fn gpu_learned_mode_matches_the_reference() {
+    gpu_case(CompositeMode::Learned, 8, 3, 7, 9, 5);
+}
+
+/// The real width, and a size whose pixel count is not a multiple of the 256-wide workgroups.
+#[test]
+fn gpu_learned_mode_at_full_width_matches_the_reference() {
+    gpu_case(CompositeMode::Learned, 64, 5, 12, 17, 6);
+}
+
+#[test]
+fn gpu_uniform_mode_is_the_mean() {
+    gpu_case(CompositeMode::Uniform, 8, 5, 6, 5, 7);
+}
