@@ -66,6 +66,8 @@ pub struct Global {
 }
 
 #[derive(Subcommand)]
+// Parsed once per process: the size of the largest variant costs nothing.
+#[allow(clippy::large_enum_variant)]
 pub enum Command {
     /// Read a dataset (COLMAP, NeRF-LLFF or transforms.json) into a new scene directory.
     Ingest(IngestArgs),
@@ -225,8 +227,9 @@ pub struct PruneArgs {
 
 #[derive(Clone, Copy, ValueEnum)]
 pub enum Method {
-    /// CoCoGaussian: circle-of-confusion Gaussians, for photos with depth-of-field blur
-    /// (not implemented yet: refused with a message).
+    /// CoCoGaussian: circle-of-confusion Gaussians, for photos with depth-of-field blur.
+    /// Experimental: trains end to end and learns per-photo focus distances, but its sharp
+    /// renders do not yet beat 3dgs (BENCHMARKS.md); `--resume` is not supported for it yet.
     Cocog,
     /// Plain 3D Gaussian Splatting, for sharp photos.
     #[value(name = "3dgs")]
@@ -244,16 +247,31 @@ stays beside OUTPUT.checkpoint and --resume continues both."
 pub struct TrainArgs {
     #[command(flatten)]
     pub io: SceneToScene,
-    /// Training method. Default 3dgs (until cocog lands).
+    /// Training method. Default 3dgs (cocog becomes the default once it beats 3dgs on blurred
+    /// photos).
     #[arg(long, value_enum)]
     pub method: Option<Method>,
     /// Training iterations, one view each. Default 7000 (3DGS's and the paper's long runs
     /// use 30000).
     #[arg(long)]
     pub iterations: Option<u64>,
-    /// CoC Gaussians per base Gaussian, M (the paper uses 5).
+    /// cocog: CoC Gaussians per base Gaussian, M. Default: the variant's (code 4, paper 5).
     #[arg(long = "coc-gaussians")]
     pub coc_gaussians: Option<u64>,
+    /// cocog: `code` (the released code: free offsets gated by |1/d - 1/d_F|, h_θ and F from
+    /// iteration 1500) or `paper` (aperture K, scaling β, directions; h_θ from 2000 with the
+    /// renders averaged, F from 6000). Default code.
+    #[arg(long = "coc-variant")]
+    pub coc_variant: Option<String>,
+    /// cocog: first iteration rendered through the CoC Gaussians (plain 3DGS before).
+    #[arg(long = "blur-start")]
+    pub blur_start: Option<u64>,
+    /// cocog: first iteration composited by the CNN F (the renders are averaged before).
+    #[arg(long = "composite-start")]
+    pub composite_start: Option<u64>,
+    /// cocog: hidden channels of F. Default 64 (as published); 8–16 train far faster on a CPU.
+    #[arg(long = "compositor-channels")]
+    pub compositor_channels: Option<u64>,
     /// Train on images downscaled by N (intrinsics scaled to match). Default 1.
     #[arg(long)]
     pub downscale: Option<u32>,

@@ -111,6 +111,9 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
             let mut o = options! {
                 "method" => method, "iterations" => a.iterations,
                 "coc_gaussians" => a.coc_gaussians, "downscale" => a.downscale, "seed" => a.seed,
+                "coc_variant" => a.coc_variant.clone(), "blur_start" => a.blur_start,
+                "composite_start" => a.composite_start,
+                "compositor_channels" => a.compositor_channels,
                 "sh_degree" => a.sh_degree,
                 "random_background" => a.random_background.then_some(true),
                 "resume" => a.resume.as_ref().map(|p| p.display().to_string()),

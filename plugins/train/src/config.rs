@@ -1,6 +1,6 @@
 //! Hyper-parameters of the vanilla 3DGS optimisation (INRIA 2023 defaults).
 
-use crate::DensifyConfig;
+use crate::{CocTrainConfig, DensifyConfig};
 
 /// Learning rates and schedules. Defaults are the INRIA `OptimizationParams` of the 2023
 /// release (method.md §7), which CoCoGaussian inherits.
@@ -35,6 +35,8 @@ pub struct TrainConfig {
     /// The length (scene units) that the position learning rate and the world-space density
     /// rules scale with; `None` takes INRIA's camera extent (`scene_extent`).
     pub scene_scale: Option<f64>,
+    /// CoCoGaussian on top of this schedule; `None` is plain 3DGS.
+    pub coc: Option<CocTrainConfig>,
 }
 
 impl Default for TrainConfig {
@@ -56,6 +58,7 @@ impl Default for TrainConfig {
             loss_every: 100,
             densify: Some(DensifyConfig::default()),
             scene_scale: None,
+            coc: None,
         }
     }
 }

@@ -13,6 +13,7 @@
 
 mod bench;
 mod checkpoint;
+mod coc_config;
 mod config;
 mod densify;
 mod drop_watch;
@@ -26,6 +27,7 @@ mod trainer;
 
 pub use bench::{BenchOptions, BenchReport, PhaseMs, run_bench};
 pub use checkpoint::{CHECKPOINT_FILE, CheckpointError, MomentState, TrainState};
+pub use coc_config::CocTrainConfig;
 pub use config::TrainConfig;
 pub use densify::{DensifyConfig, DensifyPlan, Origin, apply_plan, gather_rows, plan_densify};
 pub use drop_watch::{DROP_DB, DropWatch, PsnrDrop};

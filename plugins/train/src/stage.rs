@@ -15,11 +15,13 @@ use cocog_pipeline::{
 };
 use serde_json::{Value, json};
 
-use crate::{TrainConfig, TrainState, Trainer};
+use cocog_engine::coc::CocVariant;
+
+use crate::{CocTrainConfig, TrainConfig, TrainState, Trainer};
 use schedule::Schedule;
 use test_eval::TestViews;
 
-/// Vanilla 3DGS now; CoCoGaussian (`method = "cocog"`) is refused until it exists.
+/// CoCoGaussian (`method = "cocog"`) or vanilla 3DGS (`"3dgs"`, the same loop without CoC sets).
 pub struct Train;
 
 fn options() -> Vec<OptionSpec> {
@@ -27,7 +29,31 @@ fn options() -> Vec<OptionSpec> {
         OptionSpec::string(
             "method",
             "3dgs",
-            "3dgs (vanilla INRIA) or cocog (not implemented yet)",
+            "3dgs (vanilla INRIA) or cocog (CoCoGaussian: learns the defocus of each photo, \
+             keeps sharp base Gaussians)",
+        ),
+        OptionSpec::string(
+            "coc_variant",
+            "code",
+            "cocog: code (the released code: free offsets gated by |1/d - 1/d_F|, 4 copies, \
+             h_θ and F from 1500) or paper (aperture, scaling, directions; 5 copies, h_θ from \
+             2000 averaged, F from 6000)",
+        ),
+        OptionSpec::int(
+            "blur_start",
+            0,
+            "cocog: first iteration through the CoC sets (plain 3DGS before); 0 = the variant's",
+        ),
+        OptionSpec::int(
+            "composite_start",
+            0,
+            "cocog: first iteration composited by the CNN F (the sets are averaged before); \
+             0 = the variant's",
+        ),
+        OptionSpec::int(
+            "compositor_channels",
+            64,
+            "cocog: hidden channels of F (64 in the paper; fewer train faster on a CPU)",
         ),
         OptionSpec::int("iterations", 7000, "optimisation steps, one view each"),
         OptionSpec::int(
@@ -42,8 +68,8 @@ fn options() -> Vec<OptionSpec> {
         ),
         OptionSpec::int(
             "coc_gaussians",
-            5,
-            "CoC Gaussians per base Gaussian (only used by method cocog)",
+            0,
+            "cocog: CoC Gaussians M per base Gaussian; 0 = the variant's (code 4, paper 5)",
         ),
         OptionSpec::int("sh_degree", 3, "largest spherical-harmonics degree, 0 to 3"),
         OptionSpec::bool(
@@ -109,16 +135,49 @@ fn log_interval(iterations: u32) -> u32 {
     (iterations / 10).clamp(1, 100)
 }
 
-fn check_method(req: &StageRequest) -> Result<(), StageError> {
+/// CoCoGaussian's configuration when `method` is cocog, `None` for 3dgs.
+fn coc_config(req: &StageRequest, iterations: u32) -> Result<Option<CocTrainConfig>, StageError> {
     match req.options.get_str("method").unwrap_or("3dgs") {
-        "3dgs" => Ok(()),
-        "cocog" => Err(StageError::Options(
-            "method 'cocog' (CoCoGaussian) is not implemented yet; use --method 3dgs".to_owned(),
-        )),
-        other => Err(StageError::Options(format!(
-            "stage 'train' option 'method': unknown method '{other}' (use 3dgs)"
-        ))),
+        "3dgs" => return Ok(None),
+        "cocog" => {}
+        other => {
+            return Err(StageError::Options(format!(
+                "stage 'train' option 'method': unknown method '{other}' (use cocog or 3dgs)"
+            )));
+        }
     }
+    let variant = match req.options.get_str("coc_variant").unwrap_or("code") {
+        "code" => CocVariant::Code,
+        "paper" => CocVariant::Paper,
+        other => {
+            return Err(StageError::Options(format!(
+                "stage 'train' option 'coc_variant': unknown variant '{other}' (use code or paper)"
+            )));
+        }
+    };
+    let mut c = CocTrainConfig::new(variant);
+    let copies = int(req, "coc_gaussians", 0, 16)? as u32;
+    if copies > 0 {
+        c.net.copies = copies;
+    }
+    let limit = i64::from(u32::MAX);
+    let blur = int(req, "blur_start", 0, limit)? as u32;
+    if blur > 0 {
+        c.blur_start = blur;
+    }
+    let composite = int(req, "composite_start", 0, limit)? as u32;
+    if composite > 0 {
+        c.composite_start = composite;
+    }
+    c.compositor_channels = int(req, "compositor_channels", 1, 256)? as u32;
+    if c.blur_start > iterations {
+        return Err(StageError::Options(format!(
+            "stage 'train': blur_start {} is past the last iteration ({iterations}): the run \
+             would be plain 3DGS; lower blur_start or use --method 3dgs",
+            c.blur_start
+        )));
+    }
+    Ok(Some(c))
 }
 
 /// What the options ask for, checked before any file is read.
@@ -135,10 +194,8 @@ struct Plan {
 }
 
 fn plan(req: &StageRequest) -> Result<Plan, StageError> {
-    check_method(req)?;
     let iterations = int(req, "iterations", 1, i64::from(u32::MAX))? as u32;
-    // Validated so a typo fails now rather than when cocog lands.
-    int(req, "coc_gaussians", 1, 64)?;
+    let coc = coc_config(req, iterations)?;
     let schedule = Schedule::from_request(req)?;
     Ok(Plan {
         config: TrainConfig {
@@ -149,6 +206,7 @@ fn plan(req: &StageRequest) -> Result<Plan, StageError> {
             seed: int(req, "seed", 0, i64::MAX)? as u64,
             loss_every: log_interval(iterations),
             random_background: req.options.get_bool("random_background").unwrap_or(false),
+            coc,
             ..TrainConfig::default()
         },
         schedule,
@@ -188,6 +246,13 @@ fn load_resume(plan: &Plan) -> Result<Option<TrainState>, StageError> {
     let Some(path) = &plan.resume else {
         return Ok(None);
     };
+    if plan.config.coc.is_some() {
+        return Err(StageError::Options(format!(
+            "option 'resume' ({}): resuming --method cocog is not supported yet (the checkpoint \
+             holds the Gaussians but not h_θ, F or the focus distances); start afresh",
+            path.display()
+        )));
+    }
     let state = TrainState::load(path).map_err(|e| StageError::Input(e.to_string()))?;
     let what = format!("option 'resume' ({})", path.display());
     if state.downscale != plan.downscale {
@@ -288,6 +353,19 @@ impl Stage for Train {
         let ply = req.output.join("gaussians.ply");
         cocog_formats::ply::write_splats(&ply, &(&gaussians).into(), None)
             .map_err(StageError::other)?;
+        let focus = session
+            .trainer
+            .focus_distances()
+            .map_err(StageError::other)?;
+        let train_views: Vec<usize> = (0..scene.views.len())
+            .filter(|&i| scene.views[i].split == Split::Train)
+            .collect();
+        for (&i, &d) in train_views.iter().zip(&focus) {
+            scene.views[i].lens = Some(cocog_pipeline::Lens {
+                focus_distance: d,
+                aperture: None,
+            });
+        }
         session.save_final(&req.output.join("checkpoint"))?;
         session.finish_log(&req.output)?;
         scene.gaussians = Some("gaussians.ply".to_owned());
@@ -305,7 +383,16 @@ impl Stage for Train {
             "last_psnr_drop": outcome.last_drop.map(|d| d.iteration),
             "test_psnr": outcome.test.as_ref().map(|t| t.psnr),
             "test_ssim": outcome.test.as_ref().and_then(|t| t.ssim),
-            "resolved": { "schedule": schedule },
+            "method": if plan.config.coc.is_some() { "cocog" } else { "3dgs" },
+            "learned_focus_distances": focus,
+            "resolved": { "schedule": schedule, "coc": plan.config.coc.as_ref().map(|c| json!({
+                "variant": c.net.variant.name(),
+                "copies": c.net.copies,
+                "blur_start": c.blur_start,
+                "composite_start": c.composite_start,
+                "compositor_channels": c.compositor_channels,
+                "kernel_lr": [c.kernel_lr_init, c.kernel_lr_final],
+            })) },
         }))
     }
 }

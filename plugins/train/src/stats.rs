@@ -10,7 +10,7 @@ struct Params {
     n: u32,
     half_width: f32,
     half_height: f32,
-    pad: u32,
+    sets: u32,
 }
 
 /// Per Gaussian: Σ‖∂loss/∂mean2d‖ (NDC units) over the views it was visible in, and how many.
@@ -73,11 +73,25 @@ impl GradStats {
         width: u32,
         height: u32,
     ) {
+        self.accumulate_sets(rec, state, grads, width, height, 1);
+    }
+
+    /// The same over a pass that rendered `sets` copies of every Gaussian (`[set][base]`, the
+    /// CoC sets): each visible copy adds its norm and 1/`sets` of a view.
+    pub fn accumulate_sets(
+        &self,
+        rec: &mut Recorder,
+        state: &ForwardState,
+        grads: &Gradients,
+        width: u32,
+        height: u32,
+        sets: u32,
+    ) {
         let uniform = rec.uniform(&Params {
             n: self.len,
             half_width: 0.5 * width as f32,
             half_height: 0.5 * height as f32,
-            pad: 0,
+            sets: sets.max(1),
         });
         self.kernel.dispatch_1d(
             rec,

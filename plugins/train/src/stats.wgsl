@@ -2,12 +2,14 @@
 // norm of its screen-space mean gradient to `accum` and count the view in `denom`. The engine's
 // gradient is per pixel; INRIA's is per NDC unit (pixel = ((ndc + 1)·size − 1) / 2), so each
 // component is scaled by size / 2 to keep the 0.0002 threshold meaningful.
+// With CoC sets (method.md §7) the pass rendered `sets` copies of every Gaussian, [set][base]:
+// each visible copy adds its norm and 1/sets of a view, as the released code does.
 
 struct Params {
     n: u32,
     half_width: f32,
     half_height: f32,
-    pad: u32,
+    sets: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -23,10 +25,15 @@ struct Params {
 @compute @workgroup_size(256)
 fn accumulate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
     let i = gid.x + gid.y * nwg.x * 256u;
-    if (i >= params.n || status[0] != 0u || projected[12u * i + 7u] <= 0.0) {
+    if (i >= params.n || status[0] != 0u) {
         return;
     }
-    let g = vec2<f32>(v_projected[10u * i] * params.half_width, v_projected[10u * i + 1u] * params.half_height);
-    accum[i] += length(g);
-    denom[i] += 1.0;
+    for (var m = 0u; m < params.sets; m++) {
+        let j = m * params.n + i;
+        if (projected[12u * j + 7u] > 0.0) {
+            let g = vec2<f32>(v_projected[10u * j] * params.half_width, v_projected[10u * j + 1u] * params.half_height);
+            accum[i] += length(g);
+            denom[i] += 1.0 / f32(params.sets);
+        }
+    }
 }

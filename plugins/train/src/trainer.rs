@@ -11,6 +11,8 @@ use cocog_engine::{
 use crate::{GradStats, SplitMix64, TrainConfig, TrainError, ViewOrder, scene_extent};
 
 mod capacity;
+mod coc;
+mod coc_step;
 mod density;
 mod snapshot;
 
@@ -186,6 +188,8 @@ pub struct Trainer<'c> {
     order: ViewOrder,
     /// Densification statistics and the split sampler.
     stats: GradStats,
+    /// CoCoGaussian's h_θ, F and focus distances, when `config.coc` asks for them.
+    coc: Option<coc::CocState>,
     rng: SplitMix64,
     /// The length the world-space rules and the position learning rate are relative to.
     scene_scale: f64,
@@ -260,6 +264,10 @@ impl<'c> Trainer<'c> {
             moments: state.moments,
             stats: state.stats,
             rng: state.rng,
+            coc: config
+                .coc
+                .clone()
+                .map(|c| coc::CocState::new(ctx, c, config.seed)),
             batch: Some(batch),
             ws: Workspace::default(),
             capacity: 0,
@@ -323,6 +331,15 @@ impl<'c> Trainer<'c> {
             .ok_or(TrainError::Poisoned)
     }
 
+    /// The learned focus distance of every training view (scene units), once CoCoGaussian's
+    /// blurred phase has started; empty before that and for plain 3DGS.
+    pub fn focus_distances(&self) -> Result<Vec<f64>, TrainError> {
+        match &self.coc {
+            Some(c) => c.focus_distances(self.ctx, self.cameras.len()),
+            None => Ok(Vec::new()),
+        }
+    }
+
     /// Room for (tile, Gaussian) intersections a step records with.
     pub fn intersection_capacity(&self) -> u32 {
         self.capacity
@@ -373,7 +390,11 @@ impl<'c> Trainer<'c> {
             .aim(&mut batch, self.cameras[view], background)
             .and_then(|()| {
                 let mut rec = self.ctx.recorder();
-                self.optimise(&mut rec, &batch, view, it, plan, &mut watch)?;
+                if self.config.coc.as_ref().is_some_and(|c| c.blurs_at(it)) {
+                    self.optimise_coc(&mut rec, &batch, view, it, plan, background, &mut watch)?;
+                } else {
+                    self.optimise(&mut rec, &batch, view, it, plan, &mut watch)?;
+                }
                 rec.submit();
                 self.readback.start();
                 Ok(())
@@ -513,44 +534,72 @@ impl<'c> Trainer<'c> {
             self.stats.accumulate(rec, &state, &grads, w, h);
         }
         watch.times.density += watch.lap_recorded(rec)?;
-        let logged = c.loss_every > 0 && it.is_multiple_of(c.loss_every);
-        let mut ranges = vec![(&state.status.buffer, 0, 8)];
-        if logged {
-            ranges.push((&out.partials.buffer, 0, out.partials_bytes()));
-        }
-        let tag = InFlight {
-            iteration: it,
-            view,
-            num_gaussians: batch.params.num_gaussians,
-            sh_degree: batch.params.sh_degree,
-            loss: logged.then(|| out.clone()),
-        };
-        self.readback.record(rec, &ranges, tag)?;
+        self.record_readings(rec, &state.status, &out, view, it, &batch.params)?;
         // INRIA densifies before `optimizer.step()`, and the parameters it replaces have no
         // gradient, so torch skips them: no step at all when densifying, and none for the
         // opacities when resetting them.
         if plan.densify {
             return Ok(());
         }
-        let (p, g, m) = (&batch.params, &grads.params, &self.moments);
+        let g = &grads.params;
+        let v = [&g.means, &g.log_scales, &g.quats, &g.opacity_logits, &g.sh].map(|b| &b.buffer);
+        self.step_base(rec, &batch.params, v, it, plan, &state.status);
+        watch.times.optimizer += watch.lap_recorded(rec)?;
+        Ok(())
+    }
+
+    /// Records the step's read-back: the renderer's status words, and on logging iterations
+    /// the loss partials.
+    fn record_readings(
+        &mut self,
+        rec: &mut Recorder<'c>,
+        status: &GpuBuffer,
+        out: &LossOutput,
+        view: usize,
+        it: u32,
+        params: &ParamBuffers,
+    ) -> Result<(), TrainError> {
+        let c = &self.config;
+        let logged = c.loss_every > 0 && it.is_multiple_of(c.loss_every);
+        let mut ranges = vec![(&status.buffer, 0, 8)];
+        if logged {
+            ranges.push((&out.partials.buffer, 0, out.partials_bytes()));
+        }
+        let tag = InFlight {
+            iteration: it,
+            view,
+            num_gaussians: params.num_gaussians,
+            sh_degree: params.sh_degree,
+            loss: logged.then(|| out.clone()),
+        };
+        Ok(self.readback.record(rec, &ranges, tag)?)
+    }
+
+    /// Adam on the base Gaussians with gradients `v` (means, log-scales, rotations,
+    /// opacities, SH); a no-op on the GPU when `status` says the step overflowed.
+    fn step_base(
+        &self,
+        rec: &mut Recorder<'c>,
+        p: &ParamBuffers,
+        v: [&wgpu::Buffer; 5],
+        it: u32,
+        plan: Plan,
+        status: &GpuBuffer,
+    ) {
+        let (c, m) = (&self.config, &self.moments);
         let lr = AdamConfig::with_lr;
         let groups = [
             (
                 &p.means,
-                &g.means,
+                v[0],
                 &m.means,
                 c.position_lr(it, self.scene_scale),
             ),
-            (&p.log_scales, &g.log_scales, &m.log_scales, c.scaling_lr),
-            (&p.quats, &g.quats, &m.quats, c.rotation_lr),
-            (
-                &p.opacity_logits,
-                &g.opacity_logits,
-                &m.opacity_logits,
-                c.opacity_lr,
-            ),
+            (&p.log_scales, v[1], &m.log_scales, c.scaling_lr),
+            (&p.quats, v[2], &m.quats, c.rotation_lr),
+            (&p.opacity_logits, v[3], &m.opacity_logits, c.opacity_lr),
         ];
-        let skip = Some(&state.status.buffer);
+        let skip = Some(&status.buffer);
         let reset_skips = if plan.reset_opacity { 3 } else { groups.len() };
         for (k, (param, grad, moments, rate)) in groups.into_iter().enumerate() {
             if k == reset_skips {
@@ -561,9 +610,7 @@ impl<'c> Trainer<'c> {
         }
         let coeffs = sh_coeffs_per_channel(p.sh_degree) as u32;
         let sh_lr = lr(c.feature_lr).interleaved(coeffs, c.feature_rest_lr());
-        self.adam.encode(rec, &p.sh, &g.sh, &m.sh, &sh_lr, it, skip);
-        watch.times.optimizer += watch.lap_recorded(rec)?;
-        Ok(())
+        self.adam.encode(rec, &p.sh, v[4], &m.sh, &sh_lr, it, skip);
     }
 
     /// Re-lays the SH buffer and its Adam moments out for `degree`, new coefficients zero.

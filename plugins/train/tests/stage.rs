@@ -135,11 +135,14 @@ fn cocog_method_and_missing_points_are_clear_errors() {
         train.as_ref(),
         tmp.path(),
         &tmp.path().join("o1"),
-        json!({"method": "cocog"}),
+        json!({"method": "cocog", "coc_variant": "pinhole"}),
     )
     .unwrap_err();
     assert!(matches!(err, StageError::Options(_)));
-    assert!(err.to_string().contains("not implemented yet"), "{err}");
+    assert!(
+        err.to_string().contains("unknown variant 'pinhole'"),
+        "{err}"
+    );
 
     let scene_dir = ingested(tmp.path());
     let mut scene = Scene::load(&scene_dir).unwrap();

@@ -1,0 +1,84 @@
+//! CoCoGaussian's switches on top of the 3DGS schedule (method.md §7, §9).
+
+use cocog_engine::coc::{CocConfig, CocVariant};
+
+/// When and how the CoC sets join training. Defaults follow the chosen variant's source: the
+/// released code turns h_θ and F on together at 1500; the paper starts h_θ at 2000 with the
+/// sets averaged, and F at 6000.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CocTrainConfig {
+    pub net: CocConfig,
+    /// First iteration rendered through h_θ's M + 1 sets (earlier ones are plain 3DGS); the
+    /// focus distances are initialised here from the Gaussians of the moment.
+    pub blur_start: u32,
+    /// First iteration composited by F; from `blur_start` until then the sets are averaged.
+    pub composite_start: u32,
+    /// h_θ, F and the focus distances: exponential from init to final over `iterations`
+    /// steps counted from `blur_start` (the released code's kernel learning rate).
+    pub kernel_lr_init: f64,
+    pub kernel_lr_final: f64,
+    /// Channels of F's hidden layers (64 in both sources; narrower on a CPU adapter).
+    pub compositor_channels: u32,
+    /// Known focus distances (scene units), one per training view, to start from instead of
+    /// the mean camera-to-Gaussian distance (EXIF subject distance, a synthetic dataset's).
+    pub initial_focus: Option<Vec<f64>>,
+    /// Start h_θ's heads at zero instead of PyTorch's default: the first blurred step then
+    /// renders M + 1 exact copies of the base (what the wiring test compares with plain 3DGS).
+    pub zero_heads: bool,
+}
+
+impl CocTrainConfig {
+    pub fn new(variant: CocVariant) -> Self {
+        let (blur_start, composite_start) = match variant {
+            CocVariant::Code => (1500, 1500),
+            CocVariant::Paper => (2000, 6000),
+        };
+        Self {
+            net: CocConfig::new(variant),
+            blur_start,
+            composite_start,
+            kernel_lr_init: 1e-3,
+            kernel_lr_final: 1e-5,
+            compositor_channels: 64,
+            initial_focus: None,
+            zero_heads: false,
+        }
+    }
+
+    /// The kernel learning rate at 1-based iteration `it` of a run of `iterations`.
+    pub fn kernel_lr(&self, it: u32, iterations: u32) -> f32 {
+        let step = it.saturating_sub(self.blur_start);
+        let t = (f64::from(step) / f64::from(iterations.max(1))).clamp(0.0, 1.0);
+        let log_lr = self.kernel_lr_init.ln() * (1.0 - t) + self.kernel_lr_final.ln() * t;
+        log_lr.exp() as f32
+    }
+
+    pub fn blurs_at(&self, it: u32) -> bool {
+        it >= self.blur_start
+    }
+
+    pub fn composites_at(&self, it: u32) -> bool {
+        it >= self.composite_start.max(self.blur_start)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn kernel_lr_decays_from_the_blur_start() {
+        let c = CocTrainConfig::new(CocVariant::Code);
+        assert!((c.kernel_lr(1500, 30_000) - 1e-3).abs() < 1e-9);
+        assert!((c.kernel_lr(16_500, 30_000) - 1e-4).abs() < 1e-9);
+        assert!((c.kernel_lr(90_000, 30_000) - 1e-5).abs() < 1e-11);
+    }
+
+    #[test]
+    fn the_paper_averages_before_f_starts() {
+        let c = CocTrainConfig::new(CocVariant::Paper);
+        assert!(!c.blurs_at(1999) && c.blurs_at(2000));
+        assert!(!c.composites_at(5999) && c.composites_at(6000));
+        assert_eq!(c.net.copies, 5);
+    }
+}

@@ -1,0 +1,155 @@
+//! CoCoGaussian's state on the GPU: h_θ, the compositor F, the learned focus distances and
+//! their Adam moments, and the (M + 1)-image batch a blurred step renders.
+
+use cocog_engine::coc::{CocKernels, CocStep, init_weights};
+use cocog_engine::nn::{Compositor, CompositorConfig};
+use cocog_engine::{AdamMoments, Batch, Camera, GpuBuffer, GpuContext, ImageSpec, ParamBuffers};
+
+use crate::{CocTrainConfig, TrainError};
+
+/// Per training view, the focus distance d_F = values[view] × scale. The released code learns
+/// d_F / (largest camera-to-Gaussian distance), so one learning rate suits any scene scale.
+#[derive(Debug)]
+pub(super) struct Focus {
+    pub values: GpuBuffer,
+    pub moments: AdamMoments,
+    pub scale: f32,
+}
+
+#[derive(Debug)]
+pub(super) struct CocState {
+    pub config: CocTrainConfig,
+    pub kernels: CocKernels,
+    pub compositor: Compositor,
+    pub weights: GpuBuffer,
+    pub weights_m: AdamMoments,
+    pub f_params: GpuBuffer,
+    pub f_m: AdamMoments,
+    /// Set at the blur start, from the Gaussians of that moment.
+    pub focus: Option<Focus>,
+    /// The M + 1 sets of the current step; its parameters are replaced every step.
+    pub batch: Option<Batch>,
+}
+
+impl CocState {
+    pub fn new(ctx: &GpuContext, config: CocTrainConfig, seed: u64) -> Self {
+        let kernels = CocKernels::new(ctx, config.net);
+        let mlp = config.net.mlp();
+        let mut weights = init_weights(&mlp, seed ^ 0x6C0C_0000_0000_0001);
+        if config.zero_heads {
+            let (_, fan_out, w, b) = mlp.layers[3];
+            weights[w..b + fan_out].iter_mut().for_each(|v| *v = 0.0);
+        }
+        let compositor = Compositor::new(
+            ctx,
+            CompositorConfig::with_channels(config.compositor_channels),
+        );
+        let f_init = compositor.init_params(seed ^ 0x6C0C_0000_0000_0002);
+        Self {
+            weights_m: AdamMoments::new(ctx, weights.len() as u32),
+            weights: ctx.storage_from("coc weights", &weights),
+            f_m: AdamMoments::new(ctx, f_init.len() as u32),
+            f_params: ctx.storage_from("compositor params", &f_init),
+            compositor,
+            kernels,
+            focus: None,
+            batch: None,
+            config,
+        }
+    }
+
+    pub fn sets(&self) -> u32 {
+        self.config.net.copies + 1
+    }
+
+    /// Initialises the focus distances as the released code does at its blur start: per view,
+    /// the mean distance from its camera centre to the Gaussians, over the largest such
+    /// distance of any view.
+    pub fn init_focus(&mut self, ctx: &GpuContext, means: &[[f32; 3]], cameras: &[Camera]) {
+        let centres: Vec<[f64; 3]> = cameras.iter().map(camera_centre).collect();
+        let mut max_depth: f64 = 0.0;
+        let means_of: Vec<f64> = centres
+            .iter()
+            .map(|c| {
+                let mut sum = 0.0;
+                for m in means {
+                    let d = (0..3)
+                        .map(|k| (f64::from(m[k]) - c[k]).powi(2))
+                        .sum::<f64>()
+                        .sqrt();
+                    max_depth = max_depth.max(d);
+                    sum += d;
+                }
+                sum / means.len().max(1) as f64
+            })
+            .collect();
+        let scale = if max_depth > 0.0 { max_depth } else { 1.0 };
+        let start = match &self.config.initial_focus {
+            Some(known) if known.len() == means_of.len() => known,
+            _ => &means_of,
+        };
+        let values: Vec<f32> = start.iter().map(|d| (d / scale) as f32).collect();
+        self.focus = Some(Focus {
+            moments: AdamMoments::new(ctx, values.len() as u32),
+            values: ctx.storage_from("focus", &values),
+            scale: scale as f32,
+        });
+    }
+
+    /// The step's view for the CoC kernels (`init_focus` must have run).
+    pub fn step_for(&self, view: usize, camera: &Camera) -> Result<CocStep, TrainError> {
+        let focus = self.focus.as_ref().ok_or(TrainError::Poisoned)?;
+        Ok(CocStep {
+            view: view as u32,
+            camera_centre: camera_centre(camera).map(|v| v as f32),
+            focus_scale: focus.scale,
+        })
+    }
+
+    /// Points the (M + 1)-image batch in `slot` at `params` (means, scales, rotations of every
+    /// set; opacities and SH already repeated per set), all rendered from `camera`. A function
+    /// of the slot alone, so the batch can be borrowed beside the rest of the state.
+    pub fn aim<'b>(
+        slot: &'b mut Option<Batch>,
+        ctx: &GpuContext,
+        params: ParamBuffers,
+        sets: u32,
+        camera: Camera,
+        background: [f32; 3],
+    ) -> Result<&'b Batch, TrainError> {
+        let n = params.num_gaussians / sets.max(1);
+        let specs: Vec<ImageSpec> = (0..sets)
+            .map(|m| ImageSpec {
+                camera,
+                background,
+                first: m * n,
+                count: n,
+            })
+            .collect();
+        match slot {
+            Some(b) => {
+                b.params = params;
+                b.set_images(ctx, specs)?;
+            }
+            None => *slot = Some(Batch::new(ctx, params, specs)?),
+        }
+        slot.as_ref().ok_or(TrainError::Poisoned)
+    }
+
+    /// Learned focus distances per training view, in scene units.
+    pub fn focus_distances(&self, ctx: &GpuContext, views: usize) -> Result<Vec<f64>, TrainError> {
+        let Some(f) = &self.focus else {
+            return Ok(Vec::new());
+        };
+        let v: Vec<f32> = ctx.read(&f.values, views)?;
+        Ok(v.iter()
+            .map(|x| f64::from(*x) * f64::from(f.scale))
+            .collect())
+    }
+}
+
+/// The camera centre in world coordinates (the translation of `world_from_camera`).
+pub(super) fn camera_centre(c: &Camera) -> [f64; 3] {
+    let m = c.world_from_camera;
+    [m[0][3], m[1][3], m[2][3]]
+}
