@@ -48,7 +48,16 @@ impl<T> Readback<T> {
     ) -> Result<(), EngineError> {
         let ctx = rec.ctx();
         let total: u64 = ranges.iter().map(|r| r.2.next_multiple_of(4)).sum();
-        let slot = match self.free.iter().position(|s| s.buffer.size() >= total) {
+        // The smallest slot that fits: a plain step taking the one large slot under load
+        // would make the next logging step allocate another.
+        let best = self
+            .free
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| s.buffer.size() >= total)
+            .min_by_key(|(_, s)| s.buffer.size())
+            .map(|(i, _)| i);
+        let slot = match best {
             Some(i) => self.free.swap_remove(i),
             None => {
                 ctx.counters.buffer_created();
