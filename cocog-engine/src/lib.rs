@@ -49,14 +49,14 @@ mod splats;
 mod types;
 
 pub use crate::core::{
-    Bind, CounterSnapshot, Counters, GpuBuffer, GpuContext, Kernel, MemoryTracker, Readback,
-    Recorder, UniformSlot, Workspace, device_select_probe_is_futile, quiet_headless_vulkan, shader,
-    test_gpu,
+    Bind, CounterSnapshot, Counters, GpuBuffer, GpuContext, Kernel, KernelProfiler, KernelTime,
+    MemoryTracker, Readback, Recorder, UniformSlot, Workspace, device_select_probe_is_futile,
+    quiet_headless_vulkan, shader, test_gpu,
 };
 pub use error::EngineError;
 pub use prims::{
-    Adam, AdamConfig, AdamMoments, ImageLoss, LossOutput, LossValue, PrefixSum, RadixSort,
-    SortBuffers, SortCount,
+    Adam, AdamConfig, AdamMoments, Gemm, GemmLayout, GemmShape, GemmTile, ImageLoss, LossOutput,
+    LossValue, PrefixSum, RadixSort, SortBuffers, SortCount,
 };
 pub use splat::{Batch, ForwardState, Gradients, ImageSpec, ParamBuffers, RenderedImage, Renderer};
 pub use types::{

@@ -1,12 +1,14 @@
 //! Data-parallel building blocks that know nothing of Gaussians: prefix sum, radix sort, the
-//! Adam step and the L1 + D-SSIM image loss.
+//! Adam step, the L1 + D-SSIM image loss and a tiled matrix product for the networks.
 
 mod adam;
+mod gemm;
 mod loss;
 mod scan;
 mod sort;
 
 pub use adam::{Adam, AdamConfig, AdamMoments};
+pub use gemm::{Gemm, GemmLayout, GemmShape, GemmTile};
 pub use loss::{ImageLoss, LossOutput, LossValue};
 pub use scan::PrefixSum;
 pub use sort::{RadixSort, SortBuffers, SortCount};

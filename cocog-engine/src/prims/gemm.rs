@@ -1,0 +1,221 @@
+//! One tiled matrix-product kernel (gemm.wgsl) specialised per problem by a WGSL prelude that
+//! says how to read A and B and where C goes: the MLP h_θ's layers and their gradients, and
+//! F's convolutions as implicit GEMMs. Long reductions (weight gradients sum over every
+//! Gaussian or pixel) split K across workgroups and add the partial products in a fixed order,
+//! so results are reproducible.
+
+use crate::core::{Bind, GpuContext, Kernel, Recorder, Workspace, shader};
+
+/// Workgroups along x before the tile grid folds into y.
+const MAX_GRID_X: u32 = 65_535;
+/// K per split is at least this, so each workgroup amortises its tile loads; splits are added
+/// until the grid has about `TARGET_GROUPS` workgroups.
+const MIN_K_SPLIT: u32 = 256;
+const TARGET_GROUPS: u32 = 256;
+
+/// The block of C one workgroup computes: its threads as rows × columns, each computing 4×4
+/// values of C. Small problems (a weight gradient of 16 × 76) want small tiles, long ones
+/// (a layer over every Gaussian) big square ones.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct GemmTile {
+    pub thread_rows: u32,
+    pub thread_cols: u32,
+}
+
+impl GemmTile {
+    /// 64 × 64 from 256 threads.
+    pub const SQUARE: Self = Self::new(16, 16);
+
+    pub const fn new(thread_rows: u32, thread_cols: u32) -> Self {
+        Self {
+            thread_rows,
+            thread_cols,
+        }
+    }
+
+    /// The tile that wastes least on an `m` × `n` result (ties: more threads), among
+    /// workgroups of 64 or 256 threads.
+    pub fn for_shape(m: u32, n: u32) -> Self {
+        const CHOICES: [GemmTile; 8] = [
+            GemmTile::new(16, 16),
+            GemmTile::new(4, 64),
+            GemmTile::new(2, 128),
+            GemmTile::new(64, 4),
+            GemmTile::new(8, 8),
+            GemmTile::new(4, 16),
+            GemmTile::new(2, 32),
+            GemmTile::new(16, 4),
+        ];
+        let padded = |t: &GemmTile| {
+            let (bm, bn) = (4 * t.thread_rows, 4 * t.thread_cols);
+            u64::from(m.div_ceil(bm) * bm) * u64::from(n.div_ceil(bn) * bn)
+        };
+        let mut best = CHOICES[0];
+        for t in CHOICES {
+            // Within 10 % of the least padding, prefer the bigger workgroup (listed first).
+            if padded(&t) * 10 < padded(&best) * 9 {
+                best = t;
+            }
+        }
+        best
+    }
+
+    /// Rows and columns of the tile, and the depth of a staged slice (so both slices fit the
+    /// 16 KiB of workgroup memory every adapter has).
+    fn dims(self) -> (u32, u32, u32) {
+        let (bm, bn) = (4 * self.thread_rows, 4 * self.thread_cols);
+        let bk = if bm + bn > 256 { 8 } else { 16 };
+        (bm, bn, bk)
+    }
+}
+
+/// How the problem's operands lie in memory and whether K is split.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct GemmLayout {
+    /// A(m, k) is contiguous along k (row-major A), else along m.
+    pub a_k_fast: bool,
+    /// B(k, n) is contiguous along k (B stored transposed), else along n.
+    pub b_k_fast: bool,
+    /// Sum K in independent ranges, then reduce (for K ≫ M·N).
+    pub split_k: bool,
+    pub tile: GemmTile,
+}
+
+/// M, N, K (per batch), the batch count and up to 10 problem parameters (the prelude reads
+/// them as `gemm.u0`…`gemm.u9`). Without split K, batches are independent products; with it,
+/// the sum runs over every batch too.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct GemmShape {
+    pub m: u32,
+    pub n: u32,
+    pub k: u32,
+    pub batches: u32,
+    pub params: [u32; 10],
+}
+
+impl Default for GemmShape {
+    fn default() -> Self {
+        Self {
+            m: 0,
+            n: 0,
+            k: 0,
+            batches: 1,
+            params: [0; 10],
+        }
+    }
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Dims {
+    m: u32,
+    n: u32,
+    k: u32,
+    k_split: u32,
+    parts: u32,
+    batches: u32,
+    params: [u32; 10],
+}
+
+/// A compiled problem. Binding 0 is the dimensions' uniform and, with `split_k`, binding 1 the
+/// partial products; the prelude's own bindings start at 2.
+#[derive(Debug)]
+pub struct Gemm {
+    layout: GemmLayout,
+    tile: Kernel,
+    reduce: Option<Kernel>,
+}
+
+/// Split-K partial products, declared for the problem (no-ops without a split).
+fn partials_source(split: bool) -> &'static str {
+    if split {
+        "@group(0) @binding(1) var<storage, read_write> gemm_partials: array<f32>;\n\
+         fn store_partial(s: u32, m: u32, n: u32, v: f32) { gemm_partials[(s * gemm.m + m) * gemm.n + n] = v; }\n\
+         fn load_partial(s: u32, m: u32, n: u32) -> f32 { return gemm_partials[(s * gemm.m + m) * gemm.n + n]; }\n"
+    } else {
+        "fn store_partial(s: u32, m: u32, n: u32, v: f32) {}\n\
+         fn load_partial(s: u32, m: u32, n: u32) -> f32 { return 0.0; }\n"
+    }
+}
+
+impl Gemm {
+    /// Compiles gemm.wgsl after `problem`, which defines `load_a`, `load_b` and `epilogue`
+    /// and its bindings (2 and up); it may use `gemm.m`, `gemm.n`, `gemm.k` and `gemm.u*`.
+    pub fn new(ctx: &GpuContext, label: &str, problem: &str, layout: GemmLayout) -> Self {
+        let (_, _, bk) = layout.tile.dims();
+        let (ty, tx) = (layout.tile.thread_rows, layout.tile.thread_cols);
+        let source = format!(
+            "const A_K_FAST: bool = {};\nconst B_K_FAST: bool = {};\nconst SPLIT: bool = {};\n\
+             const TY: u32 = {ty}u;\nconst TX: u32 = {tx}u;\nconst BK: u32 = {bk}u;\n{}\n{problem}\n{}",
+            layout.a_k_fast,
+            layout.b_k_fast,
+            layout.split_k,
+            include_str!("gemm.wgsl"),
+            partials_source(layout.split_k),
+        );
+        let module = shader(ctx, label, &source);
+        Self {
+            layout,
+            tile: Kernel::labelled(ctx, &module, "gemm_tile", label),
+            reduce: layout.split_k.then(|| {
+                Kernel::labelled(ctx, &module, "gemm_reduce", &format!("{label} (reduce)"))
+            }),
+        }
+    }
+
+    /// Parts of K per batch: enough workgroups to fill the device, at least `MIN_K_SPLIT` of
+    /// K each.
+    fn parts(&self, shape: &GemmShape, tiles: u32) -> u32 {
+        if !self.layout.split_k {
+            return 1;
+        }
+        let by_work = shape.k.div_ceil(MIN_K_SPLIT).max(1);
+        let by_grid = TARGET_GROUPS.div_ceil(tiles * shape.batches.max(1)).max(1);
+        by_work
+            .min(by_grid)
+            .min(65_535 / shape.batches.max(1))
+            .max(1)
+    }
+
+    /// Records C = A·B for `shape`, with the problem's `bindings` (2 and up).
+    pub fn encode(
+        &self,
+        rec: &mut Recorder,
+        ws: &mut Workspace,
+        shape: GemmShape,
+        bindings: &[(u32, &dyn Bind)],
+    ) {
+        if shape.m == 0 || shape.n == 0 || shape.batches == 0 {
+            return;
+        }
+        let (bm, bn, bk) = self.layout.tile.dims();
+        let tiles = shape.m.div_ceil(bm) * shape.n.div_ceil(bn);
+        let parts = self.parts(&shape, tiles);
+        let k_split = shape.k.div_ceil(parts).next_multiple_of(bk).max(bk);
+        let parts = shape.k.div_ceil(k_split).max(1);
+        let dims = rec.uniform(&Dims {
+            m: shape.m,
+            n: shape.n,
+            k: shape.k,
+            k_split,
+            parts,
+            batches: shape.batches,
+            params: shape.params,
+        });
+        let mut all: Vec<(u32, &dyn Bind)> = vec![(0, &dims)];
+        all.extend_from_slice(bindings);
+        let x = tiles.min(MAX_GRID_X);
+        let grid = [x, tiles.div_ceil(x), shape.batches * parts];
+        match &self.reduce {
+            None => self.tile.dispatch(rec, &all, grid),
+            Some(reduce) => {
+                let slices = u64::from(shape.batches * parts);
+                let bytes = slices * u64::from(shape.m) * u64::from(shape.n) * 4;
+                let partials = ws.buffer(rec.ctx(), "gemm partials", bytes);
+                all.push((1, &partials));
+                self.tile.dispatch(rec, &all, grid);
+                reduce.dispatch_1d(rec, &all, (shape.m * shape.n).div_ceil(256));
+            }
+        }
+    }
+}

@@ -1,0 +1,176 @@
+// Tiled matrix product C = A·B for problems whose operands are read through functions, so one
+// body serves plain matrices, the MLP's layers and implicit-GEMM convolutions (im2col gathered
+// while loading a tile). The problem's prelude defines, before this body:
+//   const A_K_FAST, B_K_FAST: bool   which index of A(m, k) and B(k, n) is contiguous in memory
+//                                    (loading along it keeps neighbouring threads on
+//                                    neighbouring addresses)
+//   const SPLIT: bool                 K is cut into ranges whose partial products gemm_reduce
+//                                    sums in a fixed order
+//   const TY, TX, BK: u32             the workgroup's threads as TY rows × TX columns (each
+//                                    computes 4×4 values: a tile of 4·TY × 4·TX) and the depth
+//                                    of a staged slice
+//   fn load_a(b, m, k) -> f32, fn load_b(b, k, n) -> f32   called only in range
+//   fn epilogue(b, m, n, v)          stores a finished C(m, n) of batch b
+//   fn store_partial(s, m, n, v), fn load_partial(s, m, n) -> f32   (no-ops without SPLIT)
+// Batches: without SPLIT, gemm.batches independent products (grid z = batch); with SPLIT, a
+// sum over batches as well as K (grid z = batch × parts + part of K), e.g. a weight gradient
+// over every pixel of every image.
+
+struct GemmDims {
+    m: u32,
+    n: u32,
+    // K per batch.
+    k: u32,
+    // K per part (a multiple of BK) and parts per batch (1 without SPLIT).
+    k_split: u32,
+    parts: u32,
+    batches: u32,
+    // Problem parameters, named by the prelude.
+    u0: u32,
+    u1: u32,
+    u2: u32,
+    u3: u32,
+    u4: u32,
+    u5: u32,
+    u6: u32,
+    u7: u32,
+    u8: u32,
+    u9: u32,
+}
+
+@group(0) @binding(0) var<uniform> gemm: GemmDims;
+
+const WG: u32 = TY * TX;
+const BM: u32 = 4u * TY;
+const BN: u32 = 4u * TX;
+
+// [BK][BM / 4] and [BK][BN / 4]: a thread's 4 rows (columns) of one k are one vec4.
+var<workgroup> tile_a: array<vec4<f32>, BK * TY>;
+var<workgroup> tile_b: array<vec4<f32>, BK * TX>;
+
+// (n / d, n % d) for d ≥ 1 through f32 and one correction: CPU adapters scalarise integer
+// division, which then dominates a loader. Exact while n / d < 2^23.
+fn divmod(n: u32, d: u32) -> vec2<u32> {
+    var q = u32(f32(n) / f32(d));
+    let qd = q * d;
+    if qd > n {
+        q -= 1u;
+    } else if n - qd >= d {
+        q += 1u;
+    }
+    return vec2<u32>(q, n - q * d);
+}
+
+// Never runs (batches ≥ 1), but makes both entry points use every binding of the problem, so
+// one bind group serves both.
+fn touch_all() {
+    if gemm.batches == 0u {
+        store_partial(0u, 0u, 0u, load_partial(0u, 0u, 0u));
+        epilogue(0u, 0u, 0u, load_a(0u, 0u, 0u) + load_b(0u, 0u, 0u));
+    }
+}
+
+fn finish(b: u32, m: u32, n: u32, z: u32, v: f32) {
+    if m < gemm.m && n < gemm.n {
+        if SPLIT {
+            store_partial(z, m, n, v);
+        } else {
+            epilogue(b, m, n, v);
+        }
+    }
+}
+
+@compute @workgroup_size(WG)
+fn gemm_tile(
+    @builtin(workgroup_id) wg: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
+    touch_all();
+    let tiles_n = (gemm.n + BN - 1u) / BN;
+    let tiles_m = (gemm.m + BM - 1u) / BM;
+    let tile = wg.y * nwg.x + wg.x;
+    if tile >= tiles_m * tiles_n {
+        return;
+    }
+    let m0 = (tile / tiles_n) * BM;
+    let n0 = (tile % tiles_n) * BN;
+    let z = wg.z;
+    let b = z / gemm.parts;
+    let part = z % gemm.parts;
+    let k_begin = part * gemm.k_split;
+    let k_end = min(gemm.k, k_begin + gemm.k_split);
+    let tx = lid % TX;
+    let ty = lid / TX;
+    var acc0 = vec4<f32>(0.0);
+    var acc1 = vec4<f32>(0.0);
+    var acc2 = vec4<f32>(0.0);
+    var acc3 = vec4<f32>(0.0);
+    for (var kb = k_begin; kb < k_end; kb += BK) {
+        for (var e = lid; e < BM * BK; e += WG) {
+            var mm = e % BM;
+            var kk = e / BM;
+            if A_K_FAST {
+                kk = e % BK;
+                mm = e / BK;
+            }
+            var va = 0.0;
+            if m0 + mm < gemm.m && kb + kk < k_end {
+                va = load_a(b, m0 + mm, kb + kk);
+            }
+            tile_a[kk * TY + mm / 4u][mm % 4u] = va;
+        }
+        for (var e = lid; e < BN * BK; e += WG) {
+            var nn = e % BN;
+            var kk = e / BN;
+            if B_K_FAST {
+                kk = e % BK;
+                nn = e / BK;
+            }
+            var vb = 0.0;
+            if n0 + nn < gemm.n && kb + kk < k_end {
+                vb = load_b(b, kb + kk, n0 + nn);
+            }
+            tile_b[kk * TX + nn / 4u][nn % 4u] = vb;
+        }
+        workgroupBarrier();
+        for (var kk = 0u; kk < BK; kk++) {
+            let a = tile_a[kk * TY + ty];
+            let bv = tile_b[kk * TX + tx];
+            acc0 += a.x * bv;
+            acc1 += a.y * bv;
+            acc2 += a.z * bv;
+            acc3 += a.w * bv;
+        }
+        workgroupBarrier();
+    }
+    let m = m0 + 4u * ty;
+    let n = n0 + 4u * tx;
+    for (var j = 0u; j < 4u; j++) {
+        finish(b, m, n + j, z, acc0[j]);
+        finish(b, m + 1u, n + j, z, acc1[j]);
+        finish(b, m + 2u, n + j, z, acc2[j]);
+        finish(b, m + 3u, n + j, z, acc3[j]);
+    }
+}
+
+// One thread per C(m, n): the partial products of every batch and part, summed in order.
+@compute @workgroup_size(256)
+fn gemm_reduce(
+    @builtin(workgroup_id) wg: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
+    touch_all();
+    let t = (wg.y * nwg.x + wg.x) * 256u + lid;
+    if t >= gemm.m * gemm.n {
+        return;
+    }
+    let m = t / gemm.n;
+    let n = t % gemm.n;
+    var s = 0.0;
+    for (var z = 0u; z < gemm.batches * gemm.parts; z++) {
+        s += load_partial(z, m, n);
+    }
+    epilogue(0u, m, n, s);
+}
