@@ -72,8 +72,9 @@ fn close(what: &str, gpu: f32, reference: f64, tol: f64) {
 }
 
 struct Gpu {
-    /// Per Gaussian: h_θ's input, hidden activations and heads, as the backward replays them.
-    acts: Vec<f32>,
+    /// h_θ's input, hidden activations and heads, [Gaussian][width] each, as the backward
+    /// replays them.
+    acts: [Vec<f32>; 5],
     sets: [Vec<f32>; 3],
     v_base: [Vec<f32>; 3],
     v_weights: Vec<f32>,
@@ -127,8 +128,15 @@ fn run_gpu(ctx: &GpuContext, config: CocConfig, inp: &Inputs) -> Gpu {
     rec.submit();
     let sets = (config.copies as usize + 1) * N;
     let read = |b: &wgpu::Buffer, len: usize| ctx.read::<f32>(b, len).unwrap();
-    let stride = INPUT_DIM + 3 * config.width as usize + config.heads().len;
-    let acts = read(&exp.acts, N * stride);
+    let w = config.width as usize;
+    let a = &exp.acts;
+    let acts = [
+        read(&a.input, N * INPUT_DIM),
+        read(&a.hidden[0], N * w),
+        read(&a.hidden[1], N * w),
+        read(&a.hidden[2], N * w),
+        read(&a.heads, N * config.heads().len),
+    ];
     Gpu {
         acts,
         sets: [
@@ -146,22 +154,17 @@ fn run_gpu(ctx: &GpuContext, config: CocConfig, inp: &Inputs) -> Gpu {
     }
 }
 
-fn gpu_trace(acts: &[f32], i: usize, config: &CocConfig) -> MlpTrace {
+fn gpu_trace(acts: &[Vec<f32>; 5], i: usize, config: &CocConfig) -> MlpTrace {
     let (w, h) = (config.width as usize, config.heads().len);
-    let stride = INPUT_DIM + 3 * w + h;
-    let row: Vec<f64> = acts[i * stride..(i + 1) * stride]
-        .iter()
-        .map(|&v| f64::from(v))
-        .collect();
-    let at = |a: usize, len: usize| row[a..a + len].to_vec();
+    let row = |l: usize, len: usize| -> Vec<f64> {
+        acts[l][i * len..(i + 1) * len]
+            .iter()
+            .map(|&v| f64::from(v))
+            .collect()
+    };
     MlpTrace {
-        layers: [
-            at(0, INPUT_DIM),
-            at(INPUT_DIM, w),
-            at(INPUT_DIM + w, w),
-            at(INPUT_DIM + 2 * w, w),
-        ],
-        heads: at(INPUT_DIM + 3 * w, h),
+        layers: [row(0, INPUT_DIM), row(1, w), row(2, w), row(3, w)],
+        heads: row(4, h),
     }
 }
 

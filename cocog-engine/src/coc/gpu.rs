@@ -1,12 +1,10 @@
-//! Recording h_θ, the expansion and their adjoint into a training step (see the WGSL files).
-//! Every per-step buffer comes from the caller's `Workspace`.
+//! Recording h_θ, the expansion and their adjoint into a training step: per-Gaussian kernels
+//! at both ends (forward.wgsl, backward.wgsl), the trunk as matrix products (mlp.rs). Every
+//! per-step buffer comes from the caller's `Workspace`.
 
 use super::layout::{CAMERA_FREQS, CocConfig, CocVariant, INPUT_DIM, MEAN_FREQS};
+use super::mlp::{MlpActivations, MlpKernels};
 use crate::core::{GpuBuffer, GpuContext, Kernel, Recorder, Workspace, shader};
-
-/// Gaussians per partial sum of the weight gradients: enough work per thread to amortise the
-/// second pass, few enough partials to keep their buffer small (N/1024 × parameters).
-const CHUNK: u32 = 1024;
 
 /// What changes per step: the view and its camera centre.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -24,7 +22,7 @@ struct StepUniform {
     n: u32,
     view: u32,
     focus_scale: f32,
-    chunks: u32,
+    pad0: u32,
     centre: [f32; 3],
     pad: u32,
 }
@@ -43,8 +41,8 @@ pub struct CocExpansion {
     pub means: GpuBuffer,
     pub log_scales: GpuBuffer,
     pub quats: GpuBuffer,
-    /// Per Gaussian: h_θ's input, hidden activations and heads.
-    pub acts: GpuBuffer,
+    /// h_θ's input, hidden activations and heads, one row per Gaussian.
+    pub acts: MlpActivations,
     /// Per Gaussian: the gate |1/d − 1/d_F| and its derivative in the focus parameter.
     pub gates: GpuBuffer,
     pub num_gaussians: u32,
@@ -65,10 +63,10 @@ pub struct CocGrads {
 #[derive(Debug)]
 pub struct CocKernels {
     config: CocConfig,
-    forward: Kernel,
+    embed: Kernel,
+    expand: Kernel,
+    mlp: MlpKernels,
     backward: Kernel,
-    partials: Kernel,
-    weight_sum: Kernel,
     focus_sum: Kernel,
     sum_sets: Kernel,
 }
@@ -76,16 +74,13 @@ pub struct CocKernels {
 /// WGSL constants of this configuration, prepended to every CoC shader.
 fn prelude(config: &CocConfig) -> String {
     let hl = config.heads();
-    let ml = config.mlp();
-    let width = ml.width;
-    let mut s = format!(
+    let width = config.width;
+    let s = format!(
         "const M: u32 = {m}u;\nconst WIDTH: u32 = {width}u;\nconst HEADS: u32 = {heads}u;\n\
          const PAPER: bool = {paper};\nconst H_APERTURE: u32 = {ha}u;\nconst H_BETA: u32 = {hb}u;\n\
          const H_POS: u32 = {hp}u;\nconst H_SCALE: u32 = {hs}u;\nconst H_ROT: u32 = {hr}u;\n\
          const IN_DIM: u32 = {INPUT_DIM}u;\nconst MEAN_FREQS: u32 = {MEAN_FREQS}u;\n\
-         const CAMERA_FREQS: u32 = {CAMERA_FREQS}u;\nconst MAXD: u32 = {maxd}u;\n\
-         const ACT_STRIDE: u32 = {acts}u;\nconst DELTA_STRIDE: u32 = {deltas}u;\n\
-         const P_TOTAL: u32 = {p}u;\nconst CHUNK: u32 = {CHUNK}u;\n",
+         const CAMERA_FREQS: u32 = {CAMERA_FREQS}u;\n",
         m = hl.copies,
         heads = hl.len,
         paper = config.variant == CocVariant::Paper,
@@ -94,17 +89,7 @@ fn prelude(config: &CocConfig) -> String {
         hp = hl.pos,
         hs = hl.scale,
         hr = hl.rot,
-        maxd = INPUT_DIM.max(width).max(hl.len),
-        acts = INPUT_DIM + 3 * width + hl.len,
-        deltas = 3 * width + hl.len,
-        p = ml.len,
     );
-    for (l, (fan_in, fan_out, w, b)) in ml.layers.iter().enumerate() {
-        s += &format!(
-            "const L{l}_IN: u32 = {fan_in}u;\nconst L{l}_OUT: u32 = {fan_out}u;\n\
-             const L{l}_W: u32 = {w}u;\nconst L{l}_B: u32 = {b}u;\n"
-        );
-    }
     s + include_str!("common.wgsl")
 }
 
@@ -118,10 +103,10 @@ impl CocKernels {
         let sets = shader(ctx, "coc sum sets", include_str!("sum_sets.wgsl"));
         Self {
             config,
-            forward: Kernel::new(ctx, &fwd, "forward"),
+            embed: Kernel::new(ctx, &fwd, "embed"),
+            expand: Kernel::new(ctx, &fwd, "expand"),
+            mlp: MlpKernels::new(ctx, config.mlp()),
             backward: Kernel::new(ctx, &bwd, "backward"),
-            partials: Kernel::new(ctx, &red, "weight_partials"),
-            weight_sum: Kernel::new(ctx, &red, "weight_sum"),
             focus_sum: Kernel::new(ctx, &red, "focus_sum"),
             sum_sets: Kernel::new(ctx, &sets, "sum_sets"),
         }
@@ -136,7 +121,7 @@ impl CocKernels {
             n,
             view: step.view,
             focus_scale: step.focus_scale,
-            chunks: n.div_ceil(CHUNK),
+            pad0: 0,
             centre: step.camera_centre,
             pad: 0,
         })
@@ -158,13 +143,11 @@ impl CocKernels {
     ) -> CocExpansion {
         let ctx = rec.ctx();
         let sets = u64::from(self.config.copies + 1) * u64::from(n);
-        let hl = self.config.heads();
-        let stride = INPUT_DIM + 3 * self.config.width as usize + hl.len;
         let out = CocExpansion {
             means: ws.buffer(ctx, "coc set means", sets * 12),
             log_scales: ws.buffer(ctx, "coc set log-scales", sets * 12),
             quats: ws.buffer(ctx, "coc set quats", sets * 16),
-            acts: ws.buffer(ctx, "coc acts", u64::from(n) * stride as u64 * 4),
+            acts: self.mlp.activations(ctx, ws, n),
             gates: ws.buffer(ctx, "coc gates", u64::from(n) * 8),
             num_gaussians: n,
         };
@@ -172,16 +155,28 @@ impl CocKernels {
             return out;
         }
         let u = self.uniform(rec, n, step);
-        self.forward.dispatch_1d(
+        let a = &out.acts;
+        self.embed.dispatch_1d(
             rec,
             &[
                 (0, &u),
-                (1, weights),
-                (2, means),
-                (3, log_scales),
-                (4, quats),
-                (5, focus),
-                (6, &out.acts),
+                (1, means),
+                (2, log_scales),
+                (3, quats),
+                (5, &a.input),
+            ],
+            n.div_ceil(64),
+        );
+        self.mlp.encode_forward(rec, ws, weights, a, n);
+        self.expand.dispatch_1d(
+            rec,
+            &[
+                (0, &u),
+                (1, means),
+                (2, log_scales),
+                (3, quats),
+                (4, focus),
+                (6, &a.heads),
                 (7, &out.means),
                 (8, &out.log_scales),
                 (9, &out.quats),
@@ -208,10 +203,8 @@ impl CocKernels {
     ) -> CocGrads {
         let ctx = rec.ctx();
         let n = exp.num_gaussians;
-        let width = self.config.width as usize;
         let hl = self.config.heads();
         let params = self.config.mlp().len as u32;
-        let chunks = n.div_ceil(CHUNK);
         let grads = CocGrads {
             v_means: ws.buffer(ctx, "coc v means", u64::from(n) * 12),
             v_log_scales: ws.buffer(ctx, "coc v log-scales", u64::from(n) * 12),
@@ -222,50 +215,31 @@ impl CocKernels {
         if n == 0 {
             return grads;
         }
-        let deltas = ws.buffer(
-            ctx,
-            "coc deltas",
-            u64::from(n) * (3 * width + hl.len) as u64 * 4,
-        );
+        let d_heads = ws.buffer(ctx, "coc d heads", u64::from(n) * hl.len as u64 * 4);
         let terms = ws.buffer(ctx, "coc focus terms", u64::from(n) * 4);
-        let partials = ws.buffer(
-            ctx,
-            "coc weight partials",
-            u64::from(chunks) * u64::from(params) * 4,
-        );
         let u = self.uniform(rec, n, step);
         self.backward.dispatch_1d(
             rec,
             &[
                 (0, &u),
-                (1, weights),
-                (2, quats),
-                (3, &exp.acts),
-                (4, &exp.gates),
-                (5, v_set_means),
-                (6, v_set_log_scales),
-                (7, v_set_quats),
-                (8, &grads.v_means),
-                (9, &grads.v_log_scales),
-                (10, &grads.v_quats),
-                (11, &deltas),
-                (12, &terms),
+                (1, quats),
+                (2, &exp.acts.heads),
+                (3, &exp.gates),
+                (4, v_set_means),
+                (5, v_set_log_scales),
+                (6, v_set_quats),
+                (7, &grads.v_means),
+                (8, &grads.v_log_scales),
+                (9, &grads.v_quats),
+                (10, &d_heads),
+                (11, &terms),
             ],
             n.div_ceil(64),
         );
-        let groups = params.div_ceil(256);
-        self.partials.dispatch(
-            rec,
-            &[(0, &u), (1, &exp.acts), (2, &deltas), (3, &partials)],
-            [groups, chunks, 1],
-        );
-        self.weight_sum.dispatch(
-            rec,
-            &[(0, &u), (3, &partials), (4, &grads.v_weights)],
-            [groups, 1, 1],
-        );
+        self.mlp
+            .encode_backward(rec, ws, weights, &exp.acts, &d_heads, &grads.v_weights, n);
         self.focus_sum
-            .dispatch(rec, &[(0, &u), (5, &terms), (6, &grads.v_focus)], [1, 1, 1]);
+            .dispatch(rec, &[(0, &u), (1, &terms), (2, &grads.v_focus)], [1, 1, 1]);
         grads
     }
 

@@ -14,7 +14,9 @@
 
 mod gpu;
 mod layout;
+mod mlp;
 pub mod reference;
 
 pub use gpu::{CocExpansion, CocGrads, CocKernels, CocStep};
 pub use layout::{CocConfig, CocVariant, HeadLayout, INPUT_DIM, MlpLayout, init_weights};
+pub use mlp::MlpActivations;
