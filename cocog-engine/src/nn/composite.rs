@@ -1,10 +1,9 @@
 //! Recording F and the compositing into a training step (see conv.wgsl, norm.wgsl,
 //! blend.wgsl). Every per-step buffer comes from the caller's `Workspace`.
 
+use super::conv_gemm::{ConvGemm, ConvLayer, MapSize, NO_BIAS};
 use super::layout::{CompositorConfig, CompositorLayout, IN_EPS};
 use crate::core::{Bind, GpuBuffer, GpuContext, Kernel, Recorder, Workspace, shader};
-
-const NO_BIAS: u32 = u32::MAX;
 
 /// How the renders are weighted.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -74,8 +73,11 @@ pub struct CompositeGrads {
 #[derive(Debug)]
 pub struct Compositor {
     config: CompositorConfig,
+    /// The C-channel layers as implicit GEMMs.
+    gemm: ConvGemm,
+    /// The one-channel head's forward and weight gradient, direct: a 64-row GEMM tile would
+    /// compute 63 rows for nothing.
     conv: Kernel,
-    conv_input: Kernel,
     conv_weights: Kernel,
     norm_stats: Kernel,
     norm_apply: Kernel,
@@ -92,8 +94,8 @@ impl Compositor {
         let blend = shader(ctx, "compositor blend", include_str!("blend.wgsl"));
         Self {
             config,
+            gemm: ConvGemm::new(ctx, config.channels),
             conv: Kernel::new(ctx, &conv, "conv_forward"),
-            conv_input: Kernel::new(ctx, &conv, "conv_input_grad"),
             conv_weights: Kernel::new(ctx, &conv, "conv_weight_grad"),
             norm_stats: Kernel::new(ctx, &norm, "norm_stats"),
             norm_apply: Kernel::new(ctx, &norm, "norm_apply"),
@@ -114,7 +116,7 @@ impl Compositor {
     }
 
     /// (in, out, kernel, weight offset, bias offset) of F's three convolutions.
-    fn convs(&self) -> [(u32, u32, u32, u32, u32); 3] {
+    fn convs(&self) -> [ConvLayer; 3] {
         let l = self.layout();
         let c = l.channels as u32;
         [
@@ -126,7 +128,7 @@ impl Compositor {
 
     fn conv_uniform(
         rec: &mut Recorder,
-        layer: (u32, u32, u32, u32, u32),
+        layer: ConvLayer,
         w: u32,
         h: u32,
         images: u32,
@@ -178,9 +180,15 @@ impl Compositor {
                 ws.buffer(ctx, "compositor y2", maps),
                 ws.buffer(ctx, "compositor stats2", u64::from(images * c) * 8),
             );
-            self.conv_forward(rec, c1, params, renders, &l1.0, w, h, images, true);
+            let size = MapSize {
+                width: w,
+                height: h,
+                images,
+            };
+            let g = &self.gemm;
+            g.forward(rec, ws, c1, size, params, renders, &l1.0, true);
             self.relu_norm(rec, &l1, images * c, w * h);
-            self.conv_forward(rec, c2, params, &l1.1, &l2.0, w, h, images, false);
+            g.forward(rec, ws, c2, size, params, &l1.1, &l2.0, false);
             self.relu_norm(rec, &l2, images * c, w * h);
             self.conv_forward(rec, head, params, &l2.1, &logits, w, h, images, false);
             [l1, l2]
@@ -215,10 +223,11 @@ impl Compositor {
         }
     }
 
+    /// The head's forward, one thread per output value.
     fn conv_forward(
         &self,
         rec: &mut Recorder,
-        layer: (u32, u32, u32, u32, u32),
+        layer: ConvLayer,
         params: &wgpu::Buffer,
         input: &wgpu::Buffer,
         output: &wgpu::Buffer,
@@ -304,14 +313,20 @@ impl Compositor {
             let v_z = ws.buffer(ctx, "compositor v z", maps);
             let grad_stats = ws.buffer(ctx, "compositor grad stats", u64::from(images * c) * 8);
             let [c1, c2, head] = self.convs();
+            let size = MapSize {
+                width: w,
+                height: h,
+                images,
+            };
+            let g = &self.gemm;
             // head: weights, then the gradient of its input y2.
             self.weight_grads(rec, head, &l2.1, &v_logits, &v_params, w, h, images, false);
-            self.input_grads(rec, head, params, &v_logits, &v_y, w, h, images);
+            g.input_grad(rec, ws, head, size, params, &v_logits, &v_y);
             self.relu_norm_backward(rec, l2, &v_y, &v_z, &grad_stats, images * c, w * h);
-            self.weight_grads(rec, c2, &l1.1, &v_z, &v_params, w, h, images, false);
-            self.input_grads(rec, c2, params, &v_z, &v_y, w, h, images);
+            g.weight_grad(rec, ws, c2, size, &l1.1, &v_z, &v_params, false);
+            g.input_grad(rec, ws, c2, size, params, &v_z, &v_y);
             self.relu_norm_backward(rec, l1, &v_y, &v_z, &grad_stats, images * c, w * h);
-            self.weight_grads(rec, c1, renders, &v_z, &v_params, w, h, images, true);
+            g.weight_grad(rec, ws, c1, size, renders, &v_z, &v_params, true);
         }
         CompositeGrads {
             v_renders,
@@ -319,10 +334,11 @@ impl Compositor {
         }
     }
 
+    /// The head's weight gradient, one thread per weight.
     fn weight_grads(
         &self,
         rec: &mut Recorder,
-        layer: (u32, u32, u32, u32, u32),
+        layer: ConvLayer,
         input: &wgpu::Buffer,
         v_out: &wgpu::Buffer,
         v_params: &wgpu::Buffer,
@@ -338,26 +354,6 @@ impl Compositor {
             rec,
             &[(0, &u), (2, input), (4, v_out), (6, v_params)],
             count.div_ceil(256),
-        );
-    }
-
-    fn input_grads(
-        &self,
-        rec: &mut Recorder,
-        layer: (u32, u32, u32, u32, u32),
-        params: &wgpu::Buffer,
-        v_out: &wgpu::Buffer,
-        v_in: &wgpu::Buffer,
-        w: u32,
-        h: u32,
-        images: u32,
-    ) {
-        let u = Self::conv_uniform(rec, layer, w, h, images, false);
-        let total = images * layer.0 * w * h;
-        self.conv_input.dispatch_1d(
-            rec,
-            &[(0, &u), (1, params), (4, v_out), (5, v_in)],
-            total.div_ceil(256),
         );
     }
 

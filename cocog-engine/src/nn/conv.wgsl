@@ -1,6 +1,6 @@
-// Zero-padded stride-1 convolutions of F, one thread per output value: the forward, the
-// gradient of the input and the gradients of the weights and bias (each weight sums over every
-// pixel of every image, in a fixed order). Maps are [image][channel][y][x]; the first layer
+// Zero-padded stride-1 convolutions, one thread per output value: the forward and the weight
+// and bias gradients (each weight sums over every pixel of every image, in a fixed order).
+// F's one-channel head runs here; its wider layers run as implicit GEMMs (conv_gemm.rs). Maps are [image][channel][y][x]; the first layer
 // reads the renders' rgba [image][y][x][4] directly.
 
 struct Conv {
@@ -25,7 +25,6 @@ struct Conv {
 @group(0) @binding(2) var<storage, read> input: array<f32>;
 @group(0) @binding(3) var<storage, read_write> output: array<f32>;
 @group(0) @binding(4) var<storage, read> v_out: array<f32>;
-@group(0) @binding(5) var<storage, read_write> v_in: array<f32>;
 @group(0) @binding(6) var<storage, read_write> v_params: array<f32>;
 
 const NO_BIAS: u32 = 0xffffffffu;
@@ -71,40 +70,6 @@ fn conv_forward(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) n
         }
     }
     output[t] = s;
-}
-
-// v_in[i][ci][y][x] = Σ_co Σ_k w[co][ci][k] · v_out[i][co][y − ky + pad][x − kx + pad].
-@compute @workgroup_size(256)
-fn conv_input_grad(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
-    let t = index(wg, nwg, lid);
-    let hw = cv.height * cv.width;
-    if t >= cv.images * cv.cin * hw {
-        return;
-    }
-    let x = i32(t % cv.width);
-    let y = i32((t / cv.width) % cv.height);
-    let ci = (t / hw) % cv.cin;
-    let i = t / (hw * cv.cin);
-    let pad = i32(cv.k / 2u);
-    var s = 0.0;
-    for (var co = 0u; co < cv.cout; co++) {
-        let w0 = cv.w_off + (co * cv.cin + ci) * cv.k * cv.k;
-        for (var ky = 0u; ky < cv.k; ky++) {
-            let oy = y - i32(ky) + pad;
-            if oy < 0 || oy >= i32(cv.height) {
-                continue;
-            }
-            for (var kx = 0u; kx < cv.k; kx++) {
-                let ox = x - i32(kx) + pad;
-                if ox < 0 || ox >= i32(cv.width) {
-                    continue;
-                }
-                let g = v_out[((i * cv.cout + co) * cv.height + u32(oy)) * cv.width + u32(ox)];
-                s += params[w0 + ky * cv.k + kx] * g;
-            }
-        }
-    }
-    v_in[t] = s;
 }
 
 // One thread per weight (then one per bias): Σ over images and pixels.

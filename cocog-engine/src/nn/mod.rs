@@ -4,10 +4,11 @@
 //! so the renders' gradient comes only through that product. Before F starts training the
 //! renders are averaged (`CompositeMode::Uniform`).
 //!
-//! The convolutions are direct (one thread per output value); tiled implicit-GEMM kernels with
-//! f16 storage are the planned speed-up for full-resolution photos.
+//! The C-channel convolutions run as tiled implicit GEMMs (conv_gemm.rs); the one-channel
+//! head, a sliver of the work, as direct kernels.
 
 mod composite;
+mod conv_gemm;
 mod layout;
 pub mod reference;
 

@@ -1,0 +1,291 @@
+//! F's convolutions as implicit matrix products (the im2col matrix is gathered while a tile
+//! loads, never stored): the forward, the gradient of the input, and the weight and bias
+//! gradients, which sum over every pixel of every render with split K. Maps are
+//! [image][channel][y][x]; the first layer reads the renders' rgba [image][y][x][4].
+//!
+//! Parameters shared by the three (u0…u6): width, height, the other side's channel count (cin
+//! for the forward and weight gradient, cout for the input gradient), kernel size, weight
+//! offset, bias offset (`NO_BIAS` for none), and 1 for an rgba input.
+
+use crate::core::{Bind, GpuContext, Recorder, Workspace};
+use crate::prims::{Gemm, GemmLayout, GemmShape, GemmTile};
+
+pub const NO_BIAS: u32 = u32::MAX;
+
+const COMMON: &str = "
+fn conv_width() -> u32 { return gemm.u0; }
+fn conv_height() -> u32 { return gemm.u1; }
+fn conv_ksize() -> u32 { return KS; }
+fn conv_pixels() -> u32 { return gemm.u0 * gemm.u1; }
+// (row, column) of pixel p moved by ±(kernel tap r − pad); may fall outside the map.
+fn tap(p: u32, r: u32, sign: i32) -> vec2<i32> {
+    let yx = divmod(p, conv_width());
+    let k = vec2<u32>(r / KS, r % KS);
+    let pad = i32(conv_ksize() / 2u);
+    return vec2<i32>(i32(yx.x) + sign * (i32(k.x) - pad), i32(yx.y) + sign * (i32(k.y) - pad));
+}
+fn inside(at: vec2<i32>) -> bool {
+    return at.x >= 0 && at.y >= 0 && at.x < i32(conv_height()) && at.y < i32(conv_width());
+}
+fn offset(at: vec2<i32>) -> u32 {
+    return u32(at.x) * conv_width() + u32(at.y);
+}
+// Image b's value of input channel c at pixel q (rgba renders or [channel][pixel] maps).
+fn input_at(b: u32, c: u32, q: u32) -> f32 {
+    if gemm.u6 == 1u {
+        return input[(b * conv_pixels() + q) * 4u + c];
+    }
+    return input[(b * gemm.u2 + c) * conv_pixels() + q];
+}
+";
+
+/// out[b][co][p] = bias[co] + Σ_{ci,ky,kx} W[co][ci][ky][kx]·in[b][ci][p + (ky, kx) − pad],
+/// one batch per image. M = cout, N = pixels, K = cin × k².
+const FORWARD: &str = "
+@group(0) @binding(2) var<storage, read> params: array<f32>;
+@group(0) @binding(3) var<storage, read> input: array<f32>;
+@group(0) @binding(4) var<storage, read_write> output: array<f32>;
+fn load_a(b: u32, m: u32, k: u32) -> f32 { return params[gemm.u4 + m * gemm.k + k]; }
+fn load_b(b: u32, k: u32, n: u32) -> f32 {
+    let c = vec2<u32>(k / (KS * KS), k % (KS * KS));
+    let at = tap(n, c.y, 1);
+    if !inside(at) { return 0.0; }
+    return input_at(b, c.x, offset(at));
+}
+fn epilogue(b: u32, m: u32, n: u32, v: f32) {
+    var bias = 0.0;
+    if gemm.u5 != 0xffffffffu { bias = params[gemm.u5 + m]; }
+    output[(b * gemm.m + m) * conv_pixels() + n] = v + bias;
+}
+";
+
+/// v_in[b][ci][p] = Σ_{co,ky,kx} W[co][ci][ky][kx]·v_out[b][co][p − (ky, kx) + pad].
+/// M = cin, N = pixels, K = cout × k².
+const INPUT_GRAD: &str = "
+@group(0) @binding(2) var<storage, read> params: array<f32>;
+@group(0) @binding(3) var<storage, read> v_out: array<f32>;
+@group(0) @binding(4) var<storage, read_write> v_in: array<f32>;
+// input_at refers to it; no loader here calls it, so it is never bound.
+@group(0) @binding(5) var<storage, read> input: array<f32>;
+fn load_a(b: u32, m: u32, k: u32) -> f32 {
+    let c = vec2<u32>(k / (KS * KS), k % (KS * KS));
+    return params[gemm.u4 + (c.x * gemm.m + m) * KS * KS + c.y];
+}
+fn load_b(b: u32, k: u32, n: u32) -> f32 {
+    let c = vec2<u32>(k / (KS * KS), k % (KS * KS));
+    let at = tap(n, c.y, -1);
+    if !inside(at) { return 0.0; }
+    return v_out[(b * gemm.u2 + c.x) * conv_pixels() + offset(at)];
+}
+fn epilogue(b: u32, m: u32, n: u32, v: f32) {
+    v_in[(b * gemm.m + m) * conv_pixels() + n] = v;
+}
+";
+
+/// ∂W[co][ci][ky][kx] = Σ_{b,p} v_out[b][co][p]·in[b][ci][p + (ky, kx) − pad], and the bias as
+/// a column of ones; summed over every image (batch) and pixel. M = cout, N = cin × k² (+1),
+/// K = pixels.
+const WEIGHT_GRAD: &str = "
+@group(0) @binding(2) var<storage, read> input: array<f32>;
+@group(0) @binding(3) var<storage, read> v_out: array<f32>;
+@group(0) @binding(4) var<storage, read_write> v_params: array<f32>;
+fn taps() -> u32 { return gemm.u2 * conv_ksize() * conv_ksize(); }
+fn load_a(b: u32, m: u32, k: u32) -> f32 {
+    return v_out[(b * gemm.m + m) * conv_pixels() + k];
+}
+fn load_b(b: u32, k: u32, n: u32) -> f32 {
+    if n == taps() { return 1.0; }
+    let c = vec2<u32>(n / (KS * KS), n % (KS * KS));
+    let at = tap(k, c.y, 1);
+    if !inside(at) { return 0.0; }
+    return input_at(b, c.x, offset(at));
+}
+fn epilogue(b: u32, m: u32, n: u32, v: f32) {
+    if n == taps() {
+        v_params[gemm.u5 + m] = v;
+    } else {
+        v_params[gemm.u4 + m * taps() + n] = v;
+    }
+}
+";
+
+/// One convolution layer's geometry: (cin, cout, kernel size, weight offset, bias offset).
+pub type ConvLayer = (u32, u32, u32, u32, u32);
+
+/// The compiled products of one kernel size.
+#[derive(Debug)]
+struct ConvKernels {
+    forward: Gemm,
+    input_grad: Gemm,
+    weight_grad: Gemm,
+}
+
+/// The compiled implicit-GEMM convolutions for one channel count: F's 5×5 and 3×3 layers.
+#[derive(Debug)]
+pub struct ConvGemm {
+    k3: ConvKernels,
+    k5: ConvKernels,
+}
+
+/// Maps of `images` renders of `width`×`height`.
+#[derive(Clone, Copy, Debug)]
+pub struct MapSize {
+    pub width: u32,
+    pub height: u32,
+    pub images: u32,
+}
+
+fn shape(
+    m: u32,
+    n: u32,
+    k: u32,
+    size: MapSize,
+    other: u32,
+    layer: ConvLayer,
+    rgba: bool,
+) -> GemmShape {
+    let (_, _, ks, w_off, bias) = layer;
+    GemmShape {
+        m,
+        n,
+        k,
+        batches: size.images,
+        params: [
+            size.width,
+            size.height,
+            other,
+            ks,
+            w_off,
+            bias,
+            u32::from(rgba),
+            0,
+            0,
+            0,
+        ],
+    }
+}
+
+impl ConvKernels {
+    /// `cin` is the input channel count of the layer with this kernel size (its weight
+    /// gradient's width).
+    fn new(ctx: &GpuContext, channels: u32, ks: u32, cin: u32) -> Self {
+        // Per pixel the forward and input gradient are `channels` wide; the weight gradient is
+        // channels × (taps + bias).
+        let maps = GemmTile::for_shape(channels, 1 << 16);
+        let weights = GemmTile::for_shape(channels, cin * ks * ks + 1);
+        let gemm = |label: &str, body: &str, a_k_fast: bool, b_k_fast: bool, split_k: bool| {
+            let tile = if split_k { weights } else { maps };
+            Gemm::new(
+                ctx,
+                &format!("{label} {ks}×{ks}"),
+                &format!("const KS: u32 = {ks}u;\n{COMMON}{body}"),
+                GemmLayout {
+                    a_k_fast,
+                    b_k_fast,
+                    split_k,
+                    tile,
+                },
+            )
+        };
+        Self {
+            forward: gemm("conv forward", FORWARD, true, false, false),
+            input_grad: gemm("conv input grad", INPUT_GRAD, true, false, false),
+            weight_grad: gemm("conv weight grad", WEIGHT_GRAD, true, true, true),
+        }
+    }
+}
+
+impl ConvGemm {
+    /// Kernels tiled for layers of `channels` outputs (and inputs, for the input gradient).
+    pub fn new(ctx: &GpuContext, channels: u32) -> Self {
+        Self {
+            k3: ConvKernels::new(ctx, channels, 3, channels),
+            k5: ConvKernels::new(ctx, channels, 5, 3),
+        }
+    }
+
+    fn kernels(&self, layer: ConvLayer) -> &ConvKernels {
+        if layer.2 == 5 { &self.k5 } else { &self.k3 }
+    }
+
+    pub fn forward(
+        &self,
+        rec: &mut Recorder,
+        ws: &mut Workspace,
+        layer: ConvLayer,
+        size: MapSize,
+        params: &dyn Bind,
+        input: &dyn Bind,
+        output: &dyn Bind,
+        rgba: bool,
+    ) {
+        let (cin, cout, ks, _, _) = layer;
+        let s = shape(
+            cout,
+            size.width * size.height,
+            cin * ks * ks,
+            size,
+            cin,
+            layer,
+            rgba,
+        );
+        self.kernels(layer)
+            .forward
+            .encode(rec, ws, s, &[(2, params), (3, input), (4, output)]);
+    }
+
+    pub fn input_grad(
+        &self,
+        rec: &mut Recorder,
+        ws: &mut Workspace,
+        layer: ConvLayer,
+        size: MapSize,
+        params: &dyn Bind,
+        v_out: &dyn Bind,
+        v_in: &dyn Bind,
+    ) {
+        let (cin, cout, ks, _, _) = layer;
+        let s = shape(
+            cin,
+            size.width * size.height,
+            cout * ks * ks,
+            size,
+            cout,
+            layer,
+            false,
+        );
+        self.kernels(layer)
+            .input_grad
+            .encode(rec, ws, s, &[(2, params), (3, v_out), (4, v_in)]);
+    }
+
+    pub fn weight_grad(
+        &self,
+        rec: &mut Recorder,
+        ws: &mut Workspace,
+        layer: ConvLayer,
+        size: MapSize,
+        input: &dyn Bind,
+        v_out: &dyn Bind,
+        v_params: &dyn Bind,
+        rgba: bool,
+    ) {
+        let (cin, cout, ks, _, bias) = layer;
+        let columns = cin * ks * ks + u32::from(bias != NO_BIAS);
+        let s = shape(
+            cout,
+            columns,
+            size.width * size.height,
+            size,
+            cin,
+            layer,
+            rgba,
+        );
+        self.kernels(layer).weight_grad.encode(
+            rec,
+            ws,
+            s,
+            &[(2, input), (3, v_out), (4, v_params)],
+        );
+    }
+}
