@@ -530,4 +530,20 @@ pub struct BenchArgs {
     /// Largest SH degree. Default 3 (reached only after 3000 iterations, or from --resume).
     #[arg(long = "sh-degree", default_value_t = 3)]
     pub sh_degree: u32,
+    /// What to time: a plain 3DGS step, or a CoCoGaussian step (h_θ, M + 1 renders, F) from
+    /// the first timed iteration on. Default 3dgs.
+    #[arg(long, value_enum, default_value_t = Method::Gs3d)]
+    pub method: Method,
+    /// cocog: `code` or `paper` (see `cocog train --help`). Default code.
+    #[arg(long = "coc-variant", default_value = "code")]
+    pub coc_variant: String,
+    /// cocog: CoC Gaussians per base Gaussian, M. Default: the variant's.
+    #[arg(long = "coc-gaussians")]
+    pub coc_gaussians: Option<u32>,
+    /// cocog: hidden channels of F. Default 64.
+    #[arg(long = "compositor-channels", default_value_t = 64)]
+    pub compositor_channels: u32,
+    /// Also time every GPU kernel (timestamp queries) over the profiled iterations.
+    #[arg(long)]
+    pub kernels: bool,
 }

@@ -221,6 +221,25 @@ fn bench(a: &crate::cli::BenchArgs, g: &Global, ctx: &dyn Context) -> Result<()>
         warmup: a.warmup,
         resume: a.resume.clone(),
         max_sh_degree: a.sh_degree,
+        kernels: a.kernels,
+        coc: match a.method {
+            crate::cli::Method::Gs3d => None,
+            crate::cli::Method::Cocog => {
+                let mut c =
+                    cocog_train::CocTrainConfig::named(&a.coc_variant).map_err(UsageError)?;
+                let copies = a.coc_gaussians.unwrap_or(c.net.copies);
+                if !(1..=16).contains(&copies) || !(1..=256).contains(&a.compositor_channels) {
+                    return Err(UsageError(
+                        "bench needs --coc-gaussians 1..=16 and --compositor-channels 1..=256"
+                            .to_owned(),
+                    )
+                    .into());
+                }
+                c.net.copies = copies;
+                c.compositor_channels = a.compositor_channels;
+                Some(c)
+            }
+        },
     };
     let report = cocog_train::run_bench(&a.scene, &opts, ctx)
         .with_context(|| format!("benchmarking {}", a.scene.display()))?;

@@ -4,6 +4,7 @@ use std::sync::Arc;
 
 use super::buffers::MemoryTracker;
 use super::counters::Counters;
+use super::profiler::KernelProfiler;
 use super::recorder::ArenaPool;
 use crate::EngineError;
 
@@ -24,6 +25,8 @@ pub struct GpuContext {
     pub memory: Arc<MemoryTracker>,
     /// Buffers created, blocking reads, submissions, dispatches: see `Counters`.
     pub counters: Counters,
+    /// GPU time per kernel, when enabled (benchmarks).
+    pub profiler: KernelProfiler,
     pub(crate) arenas: ArenaPool,
     /// The device's uniform offset alignment, read once (recorders pack every uniform by it).
     pub(crate) uniform_align: u64,
@@ -149,6 +152,8 @@ impl GpuContext {
         if subgroups {
             required_features |= wgpu::Features::SUBGROUP;
         }
+        // Costs nothing until the kernel profiler is enabled.
+        required_features |= adapter.features() & wgpu::Features::TIMESTAMP_QUERY;
         // Ask for what the adapter has on buffer sizes: big scenes need big buffers, and
         // asking costs nothing on adapters that have less.
         let required_limits = wgpu::Limits {
@@ -172,6 +177,7 @@ impl GpuContext {
             subgroups,
             memory: Arc::default(),
             counters: Counters::default(),
+            profiler: KernelProfiler::default(),
             arenas: ArenaPool::default(),
             uniform_align: u64::from(device.limits().min_uniform_buffer_offset_alignment),
             device,

@@ -26,16 +26,27 @@ struct Cache {
 pub struct Kernel {
     pipeline: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
-    label: &'static str,
+    label: String,
     cache: Mutex<Cache>,
 }
 
 impl Kernel {
-    pub fn new(ctx: &GpuContext, module: &wgpu::ShaderModule, entry: &'static str) -> Self {
+    pub fn new(ctx: &GpuContext, module: &wgpu::ShaderModule, entry: &str) -> Self {
+        Self::labelled(ctx, module, entry, entry)
+    }
+
+    /// `new` with the name passes, bind groups and the kernel profiler show (several kernels
+    /// share an entry point name, e.g. every matrix product's `gemm_tile`).
+    pub fn labelled(
+        ctx: &GpuContext,
+        module: &wgpu::ShaderModule,
+        entry: &str,
+        label: &str,
+    ) -> Self {
         let pipeline = ctx
             .device
             .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(entry),
+                label: Some(label),
                 layout: None,
                 module,
                 entry_point: Some(entry),
@@ -45,7 +56,7 @@ impl Kernel {
         Self {
             layout: pipeline.get_bind_group_layout(0),
             pipeline,
-            label: entry,
+            label: label.to_owned(),
             cache: Mutex::default(),
         }
     }
@@ -67,11 +78,18 @@ impl Kernel {
         let ctx = rec.ctx();
         let bind_group = self.bind_group(ctx, bindings);
         ctx.counters.dispatch();
+        let timing = ctx.profiler.writes(&self.label);
         let mut pass = rec
             .encoder()
             .begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some(self.label),
-                timestamp_writes: None,
+                label: Some(&self.label),
+                timestamp_writes: timing.as_ref().map(|(set, i)| {
+                    wgpu::ComputePassTimestampWrites {
+                        query_set: set,
+                        beginning_of_pass_write_index: Some(*i),
+                        end_of_pass_write_index: Some(i + 1),
+                    }
+                }),
             });
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &bind_group, &[]);
@@ -106,7 +124,7 @@ impl Kernel {
             .collect();
         ctx.counters.bind_group_created();
         let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some(self.label),
+            label: Some(&self.label),
             layout: &self.layout,
             entries: &entries,
         });

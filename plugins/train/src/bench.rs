@@ -12,7 +12,7 @@ use cocog_pipeline::{Context, Scene, Split, StageError};
 use serde::Serialize;
 
 use crate::stage::load;
-use crate::{DensifyConfig, PhaseTimes, TrainConfig, TrainState, Trainer};
+use crate::{CocTrainConfig, DensifyConfig, PhaseTimes, TrainConfig, TrainState, Trainer};
 
 /// What to measure.
 #[derive(Clone, Debug)]
@@ -25,6 +25,19 @@ pub struct BenchOptions {
     /// Start from a checkpoint (realistic Gaussian counts) instead of the scene's points.
     pub resume: Option<PathBuf>,
     pub max_sh_degree: u32,
+    /// Time CoCoGaussian steps: the sets and F run from the first iteration on.
+    pub coc: Option<CocTrainConfig>,
+    /// Also time every kernel with GPU timestamps during the profiled iterations (adapters
+    /// with timestamp queries).
+    pub kernels: bool,
+}
+
+/// GPU time of one kernel per iteration.
+#[derive(Clone, Debug, Serialize)]
+pub struct KernelMs {
+    pub kernel: String,
+    pub passes_per_iteration: f64,
+    pub ms_per_iteration: f64,
 }
 
 /// Milliseconds per iteration of each phase.
@@ -34,12 +47,18 @@ pub struct PhaseMs {
     pub backward: f64,
     pub optimizer: f64,
     pub density: f64,
+    /// CoCoGaussian only: h_θ and the expansion, forward and adjoint.
+    pub coc_net: f64,
+    /// CoCoGaussian only: the compositor F, forward and backward.
+    pub compositor: f64,
     pub total: f64,
 }
 
 #[derive(Clone, Debug, Serialize)]
 pub struct BenchReport {
     pub adapter: String,
+    /// `3dgs` or `cocog`.
+    pub method: String,
     /// Which gradient-accumulation path the backward used.
     pub float_atomics: bool,
     pub subgroups: bool,
@@ -59,6 +78,8 @@ pub struct BenchReport {
     pub peak_host_bytes: Option<u64>,
     /// Engine operations per timed iteration (densification iterations included).
     pub per_iteration: OpsPerIteration,
+    /// With `kernels`: GPU time per kernel over the profiled iterations, largest first.
+    pub kernels: Vec<KernelMs>,
 }
 
 /// Mean engine operations per iteration: what issue #11's execution model drives to
@@ -94,6 +115,8 @@ fn per_iteration(t: &PhaseTimes, n: u32) -> PhaseMs {
         backward: ms(t.backward),
         optimizer: ms(t.optimizer),
         density: ms(t.density),
+        coc_net: ms(t.coc_net),
+        compositor: ms(t.compositor),
         total: ms(t.total()),
     }
 }
@@ -129,6 +152,11 @@ pub fn run_bench(
         densify: Some(DensifyConfig {
             from_iter: start.min(500),
             ..DensifyConfig::auto()
+        }),
+        coc: opts.coc.clone().map(|c| CocTrainConfig {
+            blur_start: start + 1,
+            composite_start: start + 1,
+            ..c
         }),
         ..TrainConfig::default()
     };
@@ -172,9 +200,16 @@ pub fn run_bench(
     let seconds = clock.elapsed().as_secs_f64();
     let ops = gpu.counters.snapshot() - ops_before;
     trainer.set_profiling(true);
+    let timing = opts.kernels && gpu.profiler.enable(&gpu);
+    if opts.kernels && !timing {
+        ctx.warn("bench: this adapter has no timestamp queries; no per-kernel times");
+    }
     let mut phases = PhaseTimes::default();
     for i in 0..opts.iterations {
         let stats = trainer.step().map_err(StageError::other)?;
+        if timing {
+            gpu.profiler.collect(&gpu).map_err(StageError::other)?;
+        }
         ctx.progress(
             "bench",
             u64::from(opts.warmup + opts.iterations + i + 1),
@@ -182,9 +217,21 @@ pub fn run_bench(
         );
         phases.add(&stats.phases.unwrap_or_default());
     }
+    gpu.profiler.disable();
     let n = opts.iterations.max(1);
+    let kernels = gpu
+        .profiler
+        .take()
+        .into_iter()
+        .map(|k| KernelMs {
+            kernel: k.kernel,
+            passes_per_iteration: k.passes as f64 / f64::from(n),
+            ms_per_iteration: k.ms / f64::from(n),
+        })
+        .collect();
     Ok(BenchReport {
         adapter: gpu.adapter_name(),
+        method: if opts.coc.is_some() { "cocog" } else { "3dgs" }.to_owned(),
         float_atomics: gpu.float_atomics,
         subgroups: gpu.subgroups,
         width: views[0].camera.width,
@@ -200,6 +247,7 @@ pub fn run_bench(
         peak_gpu_bytes: gpu.memory.peak_bytes(),
         peak_host_bytes: peak_host_bytes(),
         per_iteration: OpsPerIteration::from(ops, n),
+        kernels,
     })
 }
 
@@ -214,6 +262,20 @@ fn tempfile_dir(scene_dir: &Path) -> Result<tempfile::TempDir, StageError> {
 impl BenchReport {
     /// A few aligned lines for a terminal.
     pub fn table(&self) -> String {
+        let mut out = self.summary();
+        if !self.kernels.is_empty() {
+            out += "GPU time per kernel (ms/iteration, passes/iteration):\n";
+            for k in &self.kernels {
+                out += &format!(
+                    "  {:>9.3}  {:>5.1}  {}\n",
+                    k.ms_per_iteration, k.passes_per_iteration, k.kernel
+                );
+            }
+        }
+        out
+    }
+
+    fn summary(&self) -> String {
         let p = &self.phases_ms;
         let mib = |b: u64| b as f64 / (1024.0 * 1024.0);
         let host = self
@@ -223,8 +285,9 @@ impl BenchReport {
             "adapter          {} (float atomics: {}, subgroups: {})\n\
              images           {} views at {}×{}\n\
              Gaussians        {} → {} (from iteration {})\n\
+             method           {}\n\
              throughput       {:.2} it/s, {:.1} ms/iteration ({} iterations)\n\
-             profiled ms/it   forward {:.1} | backward {:.1} | optimizer {:.1} | density {:.1} | sum {:.1}\n\
+             profiled ms/it   forward {:.1} | backward {:.1} | optimizer {:.1} | density {:.1}{} | sum {:.1}\n\
              engine ops/it    {:.2} buffers created | {:.2} blocking reads | {:.2} submissions | {:.1} dispatches | {:.2} bind groups created\n\
              peak GPU memory  {:.1} MiB (engine buffers)\n\
              peak host memory {host}\n",
@@ -237,6 +300,7 @@ impl BenchReport {
             self.gaussians_start,
             self.gaussians_end,
             self.start_iteration,
+            self.method,
             self.it_per_s,
             self.ms_per_iteration,
             self.iterations,
@@ -244,6 +308,14 @@ impl BenchReport {
             p.backward,
             p.optimizer,
             p.density,
+            if self.method == "cocog" {
+                format!(
+                    " | h_θ + expansion {:.1} | compositor {:.1}",
+                    p.coc_net, p.compositor
+                )
+            } else {
+                String::new()
+            },
             p.total,
             self.per_iteration.buffers_created,
             self.per_iteration.blocking_reads,

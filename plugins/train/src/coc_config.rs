@@ -45,6 +45,15 @@ impl CocTrainConfig {
         }
     }
 
+    /// The configuration of a variant named as on the command line (`code` or `paper`).
+    pub fn named(variant: &str) -> Result<Self, String> {
+        match variant {
+            "code" => Ok(Self::new(CocVariant::Code)),
+            "paper" => Ok(Self::new(CocVariant::Paper)),
+            other => Err(format!("unknown CoC variant '{other}' (use code or paper)")),
+        }
+    }
+
     /// The kernel learning rate at 1-based iteration `it` of a run of `iterations`.
     pub fn kernel_lr(&self, it: u32, iterations: u32) -> f32 {
         let step = it.saturating_sub(self.blur_start);

@@ -25,7 +25,7 @@ mod stage;
 mod stats;
 mod trainer;
 
-pub use bench::{BenchOptions, BenchReport, PhaseMs, run_bench};
+pub use bench::{BenchOptions, BenchReport, KernelMs, PhaseMs, run_bench};
 pub use checkpoint::{CHECKPOINT_FILE, CheckpointError, MomentState, TrainState};
 pub use coc_config::CocTrainConfig;
 pub use config::TrainConfig;

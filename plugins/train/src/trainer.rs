@@ -77,11 +77,20 @@ pub struct PhaseTimes {
     pub optimizer: f64,
     /// Gradient statistics, densify/prune decisions and re-uploads, opacity resets.
     pub density: f64,
+    /// CoCoGaussian: h_θ and the expansion into M + 1 sets, forward and adjoint.
+    pub coc_net: f64,
+    /// CoCoGaussian: the compositor F (or the mean), forward and backward.
+    pub compositor: f64,
 }
 
 impl PhaseTimes {
     pub fn total(&self) -> f64 {
-        self.forward + self.backward + self.optimizer + self.density
+        self.forward
+            + self.backward
+            + self.optimizer
+            + self.density
+            + self.coc_net
+            + self.compositor
     }
 
     pub fn add(&mut self, other: &PhaseTimes) {
@@ -89,6 +98,8 @@ impl PhaseTimes {
         self.backward += other.backward;
         self.optimizer += other.optimizer;
         self.density += other.density;
+        self.coc_net += other.coc_net;
+        self.compositor += other.compositor;
     }
 }
 

@@ -52,6 +52,7 @@ impl<'c> Trainer<'c> {
             n,
             &step,
         );
+        watch.times.coc_net += watch.lap_recorded(rec)?;
         // The sets share their base's opacity and SH; the rasterizer reads one per Gaussian.
         let stride = 3 * sh_coeffs_per_channel(base.sh_degree) as u64;
         let opacity = ws.buffer(ctx, "coc set opacities", u64::from(sets * n) * 4);
@@ -74,6 +75,7 @@ impl<'c> Trainer<'c> {
         };
         let sbatch = CocState::aim(&mut coc.batch, ctx, set_params, sets, camera, background)?;
         let state = self.renderer.encode_forward(rec, ws, sbatch, self.capacity);
+        watch.times.forward += watch.lap_recorded(rec)?;
         let (w, h) = (sbatch.width(), sbatch.height());
         let composites = coc.config.composites_at(it);
         let mode = if composites {
@@ -84,6 +86,7 @@ impl<'c> Trainer<'c> {
         let comp =
             coc.compositor
                 .encode_forward(rec, ws, &coc.f_params, &state.rgba, w, h, sets, mode);
+        watch.times.compositor += watch.lap_recorded(rec)?;
         let out = self.loss.compute(
             rec,
             ws,
@@ -98,10 +101,12 @@ impl<'c> Trainer<'c> {
         let back =
             coc.compositor
                 .encode_backward(rec, ws, &coc.f_params, &state.rgba, &comp, &out.v_pred);
+        watch.times.compositor += watch.lap_recorded(rec)?;
         let v_depth = ws.zeroed(rec, "coc v depth", u64::from(sets * w * h) * 4);
         let grads =
             self.renderer
                 .encode_backward(rec, ws, sbatch, &state, &back.v_renders, &v_depth);
+        watch.times.backward += watch.lap_recorded(rec)?;
         let g = &grads.params;
         let cg = coc.kernels.encode_backward(
             rec,
@@ -121,7 +126,7 @@ impl<'c> Trainer<'c> {
             .encode_sum_sets(rec, &g.opacity_logits, &v_opacity, n);
         coc.kernels
             .encode_sum_sets(rec, &g.sh, &v_sh, n * stride as u32);
-        watch.times.backward += watch.lap_recorded(rec)?;
+        watch.times.coc_net += watch.lap_recorded(rec)?;
         if plan.gather_stats {
             self.stats.accumulate_sets(rec, &state, &grads, w, h, sets);
         }
