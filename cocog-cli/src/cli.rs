@@ -272,6 +272,10 @@ pub struct TrainArgs {
     /// cocog: hidden channels of F. Default 64 (as published); 8–16 train far faster on a CPU.
     #[arg(long = "compositor-channels")]
     pub compositor_channels: Option<u64>,
+    /// cocog: subtract the copies' mean offset, so the CoC Gaussians sit around their base as
+    /// a circle of confusion sits around its in-focus point.
+    #[arg(long = "coc-centred")]
+    pub coc_centred: bool,
     /// Train on images downscaled by N (intrinsics scaled to match). Default 1.
     #[arg(long)]
     pub downscale: Option<u32>,

@@ -114,6 +114,7 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
                 "coc_variant" => a.coc_variant.clone(), "blur_start" => a.blur_start,
                 "composite_start" => a.composite_start,
                 "compositor_channels" => a.compositor_channels,
+                "coc_centred" => a.coc_centred.then_some(true),
                 "sh_degree" => a.sh_degree,
                 "random_background" => a.random_background.then_some(true),
                 "resume" => a.resume.as_ref().map(|p| p.display().to_string()),

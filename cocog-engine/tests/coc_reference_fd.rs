@@ -43,6 +43,7 @@ impl Probe {
 
 struct Case {
     variant: CocVariant,
+    centred: bool,
     hl: HeadLayout,
     ml: MlpLayout,
     weights: Vec<f64>,
@@ -53,7 +54,7 @@ struct Case {
 }
 
 impl Case {
-    fn new(variant: CocVariant, seed: u64) -> Self {
+    fn new(variant: CocVariant, centred: bool, seed: u64) -> Self {
         let mut config = CocConfig::new(variant);
         config.width = 8;
         let (hl, ml) = (config.heads(), config.mlp());
@@ -87,6 +88,7 @@ impl Case {
         };
         Self {
             variant,
+            centred,
             hl,
             ml,
             weights,
@@ -103,8 +105,14 @@ impl Case {
 
     fn loss(&self, base: &Base, heads: &[f64], focus: f64) -> f64 {
         let (c, _) = gate(self.base.mean, self.camera, focus);
-        self.probe
-            .loss(&expand(self.variant, &self.hl, base, heads, c))
+        self.probe.loss(&expand(
+            self.variant,
+            self.centred,
+            &self.hl,
+            base,
+            heads,
+            c,
+        ))
     }
 
     /// Every analytic gradient: weights, heads, base (as one Expanded), focus.
@@ -113,6 +121,7 @@ impl Case {
         let (c, dc_dfocus) = gate(self.base.mean, self.camera, self.focus);
         let g = expand_backward(
             self.variant,
+            self.centred,
             &self.hl,
             &self.base,
             &trace.heads,
@@ -167,8 +176,8 @@ fn field<'a>(b: &'a mut Base, name: &str, k: usize) -> &'a mut f64 {
     }
 }
 
-fn run(variant: CocVariant, seed: u64) {
-    let case = Case::new(variant, seed);
+fn run(variant: CocVariant, centred: bool, seed: u64) {
+    let case = Case::new(variant, centred, seed);
     assert_well_posed(&case);
     let heads = case.heads(&case.weights);
     let (v_weights, v_heads, v_base, v_focus) = case.analytic();
@@ -230,26 +239,60 @@ fn run(variant: CocVariant, seed: u64) {
 
 #[test]
 fn code_variant_matches_finite_differences() {
-    run(CocVariant::Code, 11);
+    run(CocVariant::Code, false, 11);
+    run(CocVariant::Code, true, 12);
 }
 
 #[test]
 fn paper_variant_matches_finite_differences() {
-    run(CocVariant::Paper, 23);
+    run(CocVariant::Paper, false, 23);
+    run(CocVariant::Paper, true, 24);
+}
+
+/// Centred copies average to the base: the circle of confusion sits on the in-focus point.
+#[test]
+fn centred_copies_average_to_the_base() {
+    for variant in [CocVariant::Code, CocVariant::Paper] {
+        let case = Case::new(variant, true, 6);
+        let (c, _) = gate(case.base.mean, case.camera, case.focus);
+        assert!(c > 0.1, "the gate must be open: {c}");
+        let sets = expand(
+            variant,
+            true,
+            &case.hl,
+            &case.base,
+            &case.heads(&case.weights),
+            c,
+        );
+        let copies = &sets[..case.hl.copies];
+        for k in 0..3 {
+            let mean = copies.iter().map(|s| s.mean[k]).sum::<f64>() / copies.len() as f64;
+            assert!((mean - case.base.mean[k]).abs() < 1e-12, "axis {k}: {mean}");
+            let spread = copies.iter().map(|s| (s.mean[k] - mean).abs()).sum::<f64>();
+            assert!(spread > 1e-4, "the copies must still spread: {spread}");
+        }
+    }
 }
 
 /// In focus (d = d_F) the gate closes: copies coincide with the base, nothing is modulated.
 #[test]
 fn in_focus_gaussians_do_not_spread() {
     for variant in [CocVariant::Code, CocVariant::Paper] {
-        let case = Case::new(variant, 5);
+        let case = Case::new(variant, false, 5);
         let d = (0..3)
             .map(|k| (case.base.mean[k] - case.camera[k]).powi(2))
             .sum::<f64>()
             .sqrt();
         let (c, _) = gate(case.base.mean, case.camera, d);
         assert!(c < 1e-12);
-        let sets = expand(variant, &case.hl, &case.base, &case.heads(&case.weights), c);
+        let sets = expand(
+            variant,
+            false,
+            &case.hl,
+            &case.base,
+            &case.heads(&case.weights),
+            c,
+        );
         let n = case.base.quat.iter().map(|v| v * v).sum::<f64>().sqrt();
         for s in sets {
             for k in 0..3 {

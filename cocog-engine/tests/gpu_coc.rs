@@ -168,9 +168,12 @@ fn gpu_trace(acts: &[Vec<f32>; 5], i: usize, config: &CocConfig) -> MlpTrace {
     }
 }
 
-fn check(variant: CocVariant, seed: u64) {
+fn check(variant: CocVariant, centred: bool, seed: u64) {
     let Some(ctx) = test_gpu() else { return };
-    let config = CocConfig::new(variant);
+    let config = CocConfig {
+        centred,
+        ..CocConfig::new(variant)
+    };
     let inp = inputs(&config, seed);
     let gpu = run_gpu(ctx, config, &inp);
     let (hl, ml) = (config.heads(), config.mlp());
@@ -208,7 +211,7 @@ fn check(variant: CocVariant, seed: u64) {
             }
         }
         let (c, dc) = gate(base.mean, CAMERA, focus);
-        let expanded = expand(variant, &hl, base, &want.heads, c);
+        let expanded = expand(variant, centred, &hl, base, &want.heads, c);
         for (m, e) in expanded.iter().enumerate() {
             let o = m * inp.bases.len() + i;
             for k in 0..3 {
@@ -230,7 +233,7 @@ fn check(variant: CocVariant, seed: u64) {
             }
         }
         let v: Vec<Expanded> = (0..sets).map(|m| inp.v_sets[m * N + i]).collect();
-        let g = expand_backward(variant, &hl, base, &trace.heads, c, &v);
+        let g = expand_backward(variant, centred, &hl, base, &trace.heads, c, &v);
         open += g.v_heads.iter().filter(|v| **v != 0.0).count();
         for k in 0..3 {
             close(
@@ -300,12 +303,14 @@ fn check(variant: CocVariant, seed: u64) {
 
 #[test]
 fn code_variant_matches_the_reference() {
-    check(CocVariant::Code, 3);
+    check(CocVariant::Code, false, 3);
+    check(CocVariant::Code, true, 13);
 }
 
 #[test]
 fn paper_variant_matches_the_reference() {
-    check(CocVariant::Paper, 4);
+    check(CocVariant::Paper, false, 4);
+    check(CocVariant::Paper, true, 14);
 }
 
 /// Opacity and SH gradients of the sets sum into their base.

@@ -39,6 +39,14 @@ fn backward(
     for (var j = 0u; j < HEADS; j++) {
         d_heads[dh + j] = 0.0;
     }
+    // Centring subtracts the copies' mean offset: each offset's gradient loses their mean.
+    var g_mean = vec3<f32>(0.0);
+    if CENTRED {
+        for (var m = 0u; m < M; m++) {
+            let o = m * step.n + g;
+            g_mean += vec3<f32>(v_set_means[3u * o], v_set_means[3u * o + 1u], v_set_means[3u * o + 2u]) / f32(M);
+        }
+    }
     var v_gate = 0.0;
     var v_mean = vec3<f32>(0.0);
     var v_ls = vec3<f32>(0.0);
@@ -67,6 +75,7 @@ fn backward(
             continue;
         }
         let raw = vec3<f32>(heads[hh + H_POS + 3u * m], heads[hh + H_POS + 3u * m + 1u], heads[hh + H_POS + 3u * m + 2u]);
+        let g_off = gm - g_mean;
         if PAPER {
             let ha = heads[hh + H_APERTURE];
             let hb = heads[hh + H_BETA + m];
@@ -74,19 +83,19 @@ fn backward(
             let beta = sigmoid(hb);
             let len = max(length(raw), 1e-12);
             let dir = raw / len;
-            let dot_g = dot(dir, gm);
+            let dot_g = dot(dir, g_off);
             d_heads[dh + H_APERTURE] += 0.5 * c * beta * dot_g * sigmoid(ha);
             d_heads[dh + H_BETA + m] += 0.5 * aperture * c * dot_g * beta * (1.0 - beta);
             v_gate += 0.5 * aperture * beta * dot_g;
-            let v_raw = 0.5 * aperture * c * beta * (gm - dir * dot_g) / len;
+            let v_raw = 0.5 * aperture * c * beta * (g_off - dir * dot_g) / len;
             d_heads[dh + H_POS + 3u * m] += v_raw.x;
             d_heads[dh + H_POS + 3u * m + 1u] += v_raw.y;
             d_heads[dh + H_POS + 3u * m + 2u] += v_raw.z;
         } else {
-            d_heads[dh + H_POS + 3u * m] += c * gm.x;
-            d_heads[dh + H_POS + 3u * m + 1u] += c * gm.y;
-            d_heads[dh + H_POS + 3u * m + 2u] += c * gm.z;
-            v_gate += dot(raw, gm);
+            d_heads[dh + H_POS + 3u * m] += c * g_off.x;
+            d_heads[dh + H_POS + 3u * m + 1u] += c * g_off.y;
+            d_heads[dh + H_POS + 3u * m + 2u] += c * g_off.z;
+            v_gate += dot(raw, g_off);
         }
     }
     let vq = (v_unit - unit * dot(unit, v_unit)) / norm;

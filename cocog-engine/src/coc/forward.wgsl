@@ -83,16 +83,26 @@ fn expand(
     gates[2u * g] = c;
     gates[2u * g + 1u] = sign(diff) / (focus_distance * focus_distance) * step.focus_scale;
 
+    // The copies' offsets, then (CENTRED) less their mean.
+    var shifts: array<vec3<f32>, M>;
+    var mean_shift = vec3<f32>(0.0);
+    for (var m = 0u; m < M; m++) {
+        let raw = vec3<f32>(heads[h + H_POS + 3u * m], heads[h + H_POS + 3u * m + 1u], heads[h + H_POS + 3u * m + 2u]);
+        if PAPER {
+            let aperture = softplus(heads[h + H_APERTURE]);
+            let beta = sigmoid(heads[h + H_BETA + m]);
+            shifts[m] = 0.5 * aperture * c * beta * raw / max(length(raw), 1e-12);
+        } else {
+            shifts[m] = c * raw;
+        }
+        mean_shift += shifts[m] / f32(M);
+    }
     for (var m = 0u; m <= M; m++) {
         var shift = vec3<f32>(0.0);
         if m < M {
-            let raw = vec3<f32>(heads[h + H_POS + 3u * m], heads[h + H_POS + 3u * m + 1u], heads[h + H_POS + 3u * m + 2u]);
-            if PAPER {
-                let aperture = softplus(heads[h + H_APERTURE]);
-                let beta = sigmoid(heads[h + H_BETA + m]);
-                shift = 0.5 * aperture * c * beta * raw / max(length(raw), 1e-12);
-            } else {
-                shift = c * raw;
+            shift = shifts[m];
+            if CENTRED {
+                shift -= mean_shift;
             }
         }
         let o = m * step.n + g;

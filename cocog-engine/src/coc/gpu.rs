@@ -77,13 +77,14 @@ fn prelude(config: &CocConfig) -> String {
     let width = config.width;
     let s = format!(
         "const M: u32 = {m}u;\nconst WIDTH: u32 = {width}u;\nconst HEADS: u32 = {heads}u;\n\
-         const PAPER: bool = {paper};\nconst H_APERTURE: u32 = {ha}u;\nconst H_BETA: u32 = {hb}u;\n\
+         const PAPER: bool = {paper};\nconst CENTRED: bool = {centred};\nconst H_APERTURE: u32 = {ha}u;\nconst H_BETA: u32 = {hb}u;\n\
          const H_POS: u32 = {hp}u;\nconst H_SCALE: u32 = {hs}u;\nconst H_ROT: u32 = {hr}u;\n\
          const IN_DIM: u32 = {INPUT_DIM}u;\nconst MEAN_FREQS: u32 = {MEAN_FREQS}u;\n\
          const CAMERA_FREQS: u32 = {CAMERA_FREQS}u;\n",
         m = hl.copies,
         heads = hl.len,
         paper = config.variant == CocVariant::Paper,
+        centred = config.centred,
         ha = hl.aperture.unwrap_or(0),
         hb = hl.beta.unwrap_or(0),
         hp = hl.pos,

@@ -45,6 +45,10 @@ pub struct CocConfig {
     pub copies: u32,
     /// Hidden width of the 3-layer ReLU trunk.
     pub width: u32,
+    /// Subtract the copies' mean offset, so they sit around the base as a circle of
+    /// confusion sits around the in-focus point (neither source does; without it the copies
+    /// can translate a Gaussian per view).
+    pub centred: bool,
 }
 
 impl CocConfig {
@@ -53,6 +57,7 @@ impl CocConfig {
             variant,
             copies: variant.default_copies(),
             width: 64,
+            centred: false,
         }
     }
 

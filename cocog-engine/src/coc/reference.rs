@@ -162,22 +162,43 @@ fn offset(variant: CocVariant, hl: &HeadLayout, heads: &[f64], c: f64, m: usize)
     }
 }
 
+/// The M copies' offsets; with `centred`, their mean is subtracted, so the copies sit
+/// around the base like a circle of confusion around its in-focus point.
+fn offsets(
+    variant: CocVariant,
+    hl: &HeadLayout,
+    heads: &[f64],
+    c: f64,
+    centred: bool,
+) -> Vec<[f64; 3]> {
+    let mut out: Vec<[f64; 3]> = (0..hl.copies)
+        .map(|m| offset(variant, hl, heads, c, m))
+        .collect();
+    if centred && !out.is_empty() {
+        let mean = [0, 1, 2].map(|k| out.iter().map(|o| o[k]).sum::<f64>() / out.len() as f64);
+        for o in &mut out {
+            for k in 0..3 {
+                o[k] -= mean[k];
+            }
+        }
+    }
+    out
+}
+
 /// The M + 1 sets of one base Gaussian, copies first and the modulated base set last.
 pub fn expand(
     variant: CocVariant,
+    centred: bool,
     hl: &HeadLayout,
     base: &Base,
     heads: &[f64],
     c: f64,
 ) -> Vec<Expanded> {
     let (unit, _) = normalize4(base.quat);
+    let shifts = offsets(variant, hl, heads, c, centred);
     (0..=hl.copies)
         .map(|m| {
-            let shift = if m < hl.copies {
-                offset(variant, hl, heads, c, m)
-            } else {
-                [0.0; 3]
-            };
+            let shift = shifts.get(m).copied().unwrap_or([0.0; 3]);
             Expanded {
                 mean: [0, 1, 2].map(|k| base.mean[k] + shift[k]),
                 log_scale: [0, 1, 2]
@@ -201,6 +222,7 @@ pub struct ExpandGrads {
 /// The adjoint of `expand`: `v` holds the gradient of every set (same order).
 pub fn expand_backward(
     variant: CocVariant,
+    centred: bool,
     hl: &HeadLayout,
     base: &Base,
     heads: &[f64],
@@ -208,6 +230,15 @@ pub fn expand_backward(
     v: &[Expanded],
 ) -> ExpandGrads {
     let (unit, norm) = normalize4(base.quat);
+    // Centring subtracts the mean offset: each copy's offset gradient loses the copies' mean.
+    let m_copies = hl.copies.max(1) as f64;
+    let g_mean = [0, 1, 2].map(|k| {
+        if centred {
+            v[..hl.copies].iter().map(|g| g.mean[k]).sum::<f64>() / m_copies
+        } else {
+            0.0
+        }
+    });
     let mut v_heads = vec![0.0; hl.len];
     let mut v_gate = 0.0;
     let mut v_mean = [0.0; 3];
@@ -235,11 +266,12 @@ pub fn expand_backward(
             continue;
         }
         let raw = [0, 1, 2].map(|k| heads[hl.pos + 3 * m + k]);
+        let g_off = [0, 1, 2].map(|k| g.mean[k] - g_mean[k]);
         match variant {
             CocVariant::Code => {
                 for k in 0..3 {
-                    v_heads[hl.pos + 3 * m + k] += c * g.mean[k];
-                    v_gate += raw[k] * g.mean[k];
+                    v_heads[hl.pos + 3 * m + k] += c * g_off[k];
+                    v_gate += raw[k] * g_off[k];
                 }
             }
             CocVariant::Paper => {
@@ -247,14 +279,14 @@ pub fn expand_backward(
                 let (aperture, beta) = (softplus(heads[ka]), sigmoid(heads[kb]));
                 let n = raw.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-12);
                 let dir = raw.map(|v| v / n);
-                let dot: f64 = (0..3).map(|k| dir[k] * g.mean[k]).sum();
+                let dot: f64 = (0..3).map(|k| dir[k] * g_off[k]).sum();
                 // shift = ½·K·c·β·dir.
                 v_heads[ka] += 0.5 * c * beta * dot * sigmoid(heads[ka]);
                 v_heads[kb] += 0.5 * aperture * c * dot * beta * (1.0 - beta);
                 v_gate += 0.5 * aperture * beta * dot;
                 let s = 0.5 * aperture * c * beta;
                 for k in 0..3 {
-                    v_heads[hl.pos + 3 * m + k] += s * (g.mean[k] - dir[k] * dot) / n;
+                    v_heads[hl.pos + 3 * m + k] += s * (g_off[k] - dir[k] * dot) / n;
                 }
             }
         }

@@ -23,6 +23,33 @@ pub struct MomentState {
     pub v: Vec<f32>,
 }
 
+/// CoCoGaussian's learned lens model and its optimiser state: h_θ, the compositor F and the
+/// focus distances, each with Adam's moments.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CocCheckpoint {
+    /// `code` or `paper`, M, h_θ's width, whether the copies are centred, F's channels: what
+    /// the weights' layout depends on, checked on resume.
+    pub variant: String,
+    pub copies: u32,
+    pub width: u32,
+    pub centred: bool,
+    pub compositor_channels: u32,
+    pub mlp: Vec<f32>,
+    pub mlp_moments: MomentState,
+    pub compositor: Vec<f32>,
+    pub compositor_moments: MomentState,
+    /// Per training view d_F / `focus_scale`, once the blurred phase has started.
+    pub focus: Option<FocusState>,
+}
+
+/// The learned focus distances: d_F of view i is `values[i] × scale` (scene units).
+#[derive(Clone, Debug, PartialEq)]
+pub struct FocusState {
+    pub values: Vec<f32>,
+    pub moments: MomentState,
+    pub scale: f32,
+}
+
 /// A trainer's complete state between two iterations.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TrainState {
@@ -44,6 +71,8 @@ pub struct TrainState {
     /// The view order: its generator state and the views left in this epoch.
     pub order_rng: u64,
     pub order_stack: Vec<u32>,
+    /// CoCoGaussian's lens model (`--method cocog` only).
+    pub coc: Option<CocCheckpoint>,
 }
 
 const GROUPS: [&str; 5] = ["means", "log_scales", "quats", "opacity_logits", "sh"];
@@ -88,6 +117,34 @@ impl TrainState {
             tensors.push((format!("adam.{name}.m"), m.m.clone()));
             tensors.push((format!("adam.{name}.v"), m.v.clone()));
         }
+        let mut coc_meta = Vec::new();
+        if let Some(c) = &self.coc {
+            tensors.push(("coc.mlp".into(), c.mlp.clone()));
+            tensors.push(("adam.coc_mlp.m".into(), c.mlp_moments.m.clone()));
+            tensors.push(("adam.coc_mlp.v".into(), c.mlp_moments.v.clone()));
+            tensors.push(("coc.compositor".into(), c.compositor.clone()));
+            tensors.push((
+                "adam.coc_compositor.m".into(),
+                c.compositor_moments.m.clone(),
+            ));
+            tensors.push((
+                "adam.coc_compositor.v".into(),
+                c.compositor_moments.v.clone(),
+            ));
+            coc_meta.extend([
+                ("coc_variant", c.variant.clone()),
+                ("coc_copies", c.copies.to_string()),
+                ("coc_width", c.width.to_string()),
+                ("coc_centred", c.centred.to_string()),
+                ("coc_compositor_channels", c.compositor_channels.to_string()),
+            ]);
+            if let Some(f) = &c.focus {
+                tensors.push(("coc.focus".into(), f.values.clone()));
+                tensors.push(("adam.coc_focus.m".into(), f.moments.m.clone()));
+                tensors.push(("adam.coc_focus.v".into(), f.moments.v.clone()));
+                coc_meta.push(("coc_focus_scale", f.scale.to_string()));
+            }
+        }
         let views: Vec<(String, TensorView<'_>)> = tensors
             .iter()
             .map(|(name, data)| {
@@ -97,7 +154,7 @@ impl TrainState {
             })
             .collect();
         let stack: Vec<String> = self.order_stack.iter().map(u32::to_string).collect();
-        let meta = HashMap::from([
+        let mut meta = HashMap::from([
             ("format".to_owned(), FORMAT.to_owned()),
             ("version".to_owned(), VERSION.to_owned()),
             ("iteration".to_owned(), self.iteration.to_string()),
@@ -109,6 +166,7 @@ impl TrainState {
             ("order_rng".to_owned(), self.order_rng.to_string()),
             ("order_stack".to_owned(), stack.join(",")),
         ]);
+        meta.extend(coc_meta.into_iter().map(|(k, v)| (k.to_owned(), v)));
         let tmp = dir.join(format!(".{CHECKPOINT_FILE}.tmp"));
         safetensors::serialize_to_file(views, Some(meta), &tmp).map_err(|e| {
             CheckpointError::Io {
@@ -193,6 +251,68 @@ impl<'a> Reader<'a> {
             .map_err(|_| self.fail(format!("metadata `{key}` = {text:?} is not a number")))
     }
 
+    /// Tensor `name` of any length.
+    fn vector(&self, name: &str) -> Result<Vec<f32>, CheckpointError> {
+        let t = self
+            .st
+            .tensor(name)
+            .map_err(|_| self.fail(format!("tensor `{name}` is missing")))?;
+        if t.dtype() != Dtype::F32 || t.data().len() % 4 != 0 {
+            return Err(self.fail(format!("tensor `{name}` is not f32")));
+        }
+        Ok(bytemuck::pod_collect_to_vec(t.data()))
+    }
+
+    /// Tensor `name` and Adam's moments for it, all of one length.
+    fn with_moments(
+        &self,
+        name: &str,
+        adam: &str,
+    ) -> Result<(Vec<f32>, MomentState), CheckpointError> {
+        let v = self.vector(name)?;
+        let n = v.len();
+        let m = self.floats(&format!("adam.{adam}.m"), n, 1)?;
+        let s = self.floats(&format!("adam.{adam}.v"), n, 1)?;
+        Ok((v, MomentState { m, v: s }))
+    }
+
+    /// The lens model, when the metadata says the run was CoCoGaussian.
+    fn coc(&self) -> Result<Option<CocCheckpoint>, CheckpointError> {
+        let Some(variant) = self.meta.get("coc_variant") else {
+            return Ok(None);
+        };
+        let (mlp, mlp_moments) = self.with_moments("coc.mlp", "coc_mlp")?;
+        let (compositor, compositor_moments) =
+            self.with_moments("coc.compositor", "coc_compositor")?;
+        let focus = match self.meta.get("coc_focus_scale") {
+            None => None,
+            Some(_) => {
+                let (values, moments) = self.with_moments("coc.focus", "coc_focus")?;
+                let scale: f32 = self.number("coc_focus_scale")?;
+                if !(scale.is_finite() && scale > 0.0) {
+                    return Err(self.fail(format!("metadata `coc_focus_scale` = {scale}")));
+                }
+                Some(FocusState {
+                    values,
+                    moments,
+                    scale,
+                })
+            }
+        };
+        Ok(Some(CocCheckpoint {
+            variant: variant.clone(),
+            copies: self.number("coc_copies")?,
+            width: self.number("coc_width")?,
+            centred: self.text("coc_centred")? == "true",
+            compositor_channels: self.number("coc_compositor_channels")?,
+            mlp,
+            mlp_moments,
+            compositor,
+            compositor_moments,
+            focus,
+        }))
+    }
+
     /// Tensor `name`, which must hold `per` × `rows` floats.
     fn floats(&self, name: &str, rows: usize, per: usize) -> Result<Vec<f32>, CheckpointError> {
         let t = self
@@ -256,6 +376,7 @@ impl<'a> Reader<'a> {
             rng: self.number("rng")?,
             order_rng: self.number("order_rng")?,
             order_stack,
+            coc: self.coc()?,
         })
     }
 }
@@ -292,7 +413,46 @@ mod tests {
             rng: u64::MAX - 5,
             order_rng: 0xDEAD_BEEF_0000_0001,
             order_stack: vec![4, 0, 17],
+            coc: None,
         }
+    }
+
+    fn lens_model() -> CocCheckpoint {
+        let moments = |len: usize, at: f32| MomentState {
+            m: (0..len).map(|i| at + i as f32).collect(),
+            v: (0..len).map(|i| at + 0.5 * i as f32).collect(),
+        };
+        CocCheckpoint {
+            variant: "paper".into(),
+            copies: 5,
+            width: 64,
+            centred: true,
+            compositor_channels: 8,
+            mlp: vec![0.25; 7],
+            mlp_moments: moments(7, 1.0),
+            compositor: vec![-0.5; 4],
+            compositor_moments: moments(4, 2.0),
+            focus: Some(FocusState {
+                values: vec![0.4, 0.6, 0.8],
+                moments: moments(3, 3.0),
+                scale: 2.5,
+            }),
+        }
+    }
+
+    #[test]
+    fn a_lens_model_round_trips_with_and_without_focus() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut s = state();
+        s.coc = Some(lens_model());
+        s.save(dir.path()).unwrap();
+        assert_eq!(TrainState::load(dir.path()).unwrap(), s);
+        // Before the blurred phase there are no focus distances yet.
+        if let Some(c) = s.coc.as_mut() {
+            c.focus = None;
+        }
+        s.save(dir.path()).unwrap();
+        assert_eq!(TrainState::load(dir.path()).unwrap(), s);
     }
 
     #[test]

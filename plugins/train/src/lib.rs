@@ -26,7 +26,9 @@ mod stats;
 mod trainer;
 
 pub use bench::{BenchOptions, BenchReport, KernelMs, PhaseMs, run_bench};
-pub use checkpoint::{CHECKPOINT_FILE, CheckpointError, MomentState, TrainState};
+pub use checkpoint::{
+    CHECKPOINT_FILE, CheckpointError, CocCheckpoint, FocusState, MomentState, TrainState,
+};
 pub use coc_config::CocTrainConfig;
 pub use config::TrainConfig;
 pub use densify::{DensifyConfig, DensifyPlan, Origin, apply_plan, gather_rows, plan_densify};

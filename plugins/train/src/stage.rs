@@ -50,6 +50,12 @@ fn options() -> Vec<OptionSpec> {
             "cocog: first iteration composited by the CNN F (the sets are averaged before); \
              0 = the variant's",
         ),
+        OptionSpec::bool(
+            "coc_centred",
+            false,
+            "cocog: subtract the copies' mean offset, so the CoC Gaussians sit around their base \
+             (neither published source does)",
+        ),
         OptionSpec::int(
             "compositor_channels",
             64,
@@ -170,6 +176,7 @@ fn coc_config(req: &StageRequest, iterations: u32) -> Result<Option<CocTrainConf
         c.composite_start = composite;
     }
     c.compositor_channels = int(req, "compositor_channels", 1, 256)? as u32;
+    c.net.centred = req.options.get_bool("coc_centred").unwrap_or(false);
     if c.blur_start > iterations {
         return Err(StageError::Options(format!(
             "stage 'train': blur_start {} is past the last iteration ({iterations}): the run \
@@ -246,15 +253,15 @@ fn load_resume(plan: &Plan) -> Result<Option<TrainState>, StageError> {
     let Some(path) = &plan.resume else {
         return Ok(None);
     };
-    if plan.config.coc.is_some() {
-        return Err(StageError::Options(format!(
-            "option 'resume' ({}): resuming --method cocog is not supported yet (the checkpoint \
-             holds the Gaussians but not h_θ, F or the focus distances); start afresh",
-            path.display()
-        )));
-    }
     let state = TrainState::load(path).map_err(|e| StageError::Input(e.to_string()))?;
     let what = format!("option 'resume' ({})", path.display());
+    if let (Some(k), None) = (&state.coc, &plan.config.coc) {
+        return Err(StageError::Options(format!(
+            "{what}: the checkpoint is a --method cocog run ({} variant); continue it with \
+             --method cocog (its lens model would be dropped otherwise)",
+            k.variant
+        )));
+    }
     if state.downscale != plan.downscale {
         return Err(StageError::Options(format!(
             "{what}: the checkpoint was trained at downscale {}, this run asks for {}",

@@ -228,6 +228,7 @@ impl<'c> Trainer<'c> {
             order: ViewOrder::new(views.len(), config.seed),
             iteration: 0,
             params,
+            coc: None,
         };
         Self::assemble(ctx, views, config, state)
     }
@@ -275,10 +276,11 @@ impl<'c> Trainer<'c> {
             moments: state.moments,
             stats: state.stats,
             rng: state.rng,
-            coc: config
-                .coc
-                .clone()
-                .map(|c| coc::CocState::new(ctx, c, config.seed)),
+            coc: match (config.coc.clone(), &state.coc) {
+                (Some(c), Some(k)) => Some(coc::CocState::restore(ctx, c, k)?),
+                (Some(c), None) => Some(coc::CocState::new(ctx, c, config.seed)),
+                (None, _) => None,
+            },
             batch: Some(batch),
             ws: Workspace::default(),
             capacity: 0,
@@ -292,6 +294,10 @@ impl<'c> Trainer<'c> {
             config,
         };
         trainer.capacity = trainer.measure_capacity()?;
+        if let Some(c) = trainer.coc.as_ref().filter(|c| c.focus.is_some()) {
+            // A resumed blurred phase renders M + 1 copies of every Gaussian from its first step.
+            trainer.capacity = trainer.capacity.saturating_mul(c.sets());
+        }
         Ok(trainer)
     }
 
@@ -664,6 +670,8 @@ pub(super) struct Resumed {
     rng: SplitMix64,
     order: ViewOrder,
     iteration: u32,
+    /// CoCoGaussian's lens model, when resuming a run that has one.
+    coc: Option<crate::CocCheckpoint>,
 }
 
 /// Views share one resolution and match their images; the Gaussians fit the SH limit.

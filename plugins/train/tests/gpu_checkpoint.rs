@@ -2,7 +2,8 @@
 
 mod common;
 
-use cocog_train::{DensifyConfig, SplitMix64, TrainConfig, TrainState, Trainer};
+use cocog_engine::coc::CocVariant;
+use cocog_train::{CocTrainConfig, DensifyConfig, SplitMix64, TrainConfig, TrainState, Trainer};
 use common::{gpu, noisy_init, scene};
 
 fn config() -> TrainConfig {
@@ -82,5 +83,88 @@ fn resuming_from_a_saved_checkpoint_matches_the_uninterrupted_run() {
     assert!(
         d < 1e-4 && o < 1e-3 && sh < 1e-3,
         "means {d}, opacity {o}, SH {sh}"
+    );
+}
+
+/// CoCoGaussian's lens model (h_θ, F, the focus distances and their Adam moments) survives a
+/// checkpoint: the resumed run continues the blurred phase as the uninterrupted one does.
+#[test]
+fn a_cocog_run_resumes_with_its_lens_model() {
+    let Some(ctx) = gpu() else { return };
+    let mut rng = SplitMix64::new(22);
+    let s = scene(ctx, &mut rng);
+    let init = noisy_init(&s.truth, 2, &mut rng);
+    let config = || TrainConfig {
+        coc: Some(CocTrainConfig {
+            blur_start: 6,
+            composite_start: 12,
+            compositor_channels: 4,
+            ..CocTrainConfig::new(CocVariant::Code)
+        }),
+        densify: None,
+        ..config()
+    };
+    let mut straight = Trainer::new(ctx, &init, &s.train, config()).unwrap();
+    for _ in 0..20 {
+        straight.step().unwrap();
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let saved = straight.snapshot(1).unwrap();
+    let lens = saved
+        .coc
+        .as_ref()
+        .expect("a cocog run saves its lens model");
+    assert!(lens.focus.is_some(), "the blurred phase has started");
+    assert!(
+        lens.compositor_moments.v.iter().any(|v| *v > 0.0),
+        "F has trained"
+    );
+    saved.save(dir.path()).unwrap();
+    let loaded = TrainState::load(dir.path()).unwrap();
+    assert_eq!(loaded, saved);
+    let mut resumed = Trainer::resume(ctx, &loaded, &s.train, config()).unwrap();
+    assert_eq!(resumed.snapshot(1).unwrap(), saved);
+    for _ in 20..30 {
+        let (a, b) = (straight.step().unwrap(), resumed.step().unwrap());
+        assert_eq!((a.iteration, a.view), (b.iteration, b.view));
+    }
+    let (a, b) = (straight.snapshot(1).unwrap(), resumed.snapshot(1).unwrap());
+    let (ka, kb) = (a.coc.unwrap(), b.coc.unwrap());
+    let fa = ka.focus.unwrap().values;
+    let fb = kb.focus.unwrap().values;
+    let d_means = max_abs_diff(a.params.means.as_flattened(), b.params.means.as_flattened());
+    let d_mlp = max_abs_diff(&ka.mlp, &kb.mlp);
+    // F's parameters whose gradient is within 10³ of the largest: Adam (ε = 1e-15, as the released
+    // code) turns the noise of near-zero gradients (a conv bias before ReLU + InstanceNorm:
+    // v ≈ 1e-21) into steps of up to the learning rate, which differ between any two runs.
+    let v_top = ka.compositor_moments.v.iter().copied().fold(0.0, f32::max);
+    let d_f = ka
+        .compositor
+        .iter()
+        .zip(&kb.compositor)
+        .zip(&ka.compositor_moments.v)
+        .filter(|(_, v)| **v > 1e-6 * v_top)
+        .map(|((x, y), _)| (x - y).abs())
+        .fold(0.0, f32::max);
+    let d_focus = max_abs_diff(&fa, &fb);
+    eprintln!("max |Δ| means {d_means:e}, h_θ {d_mlp:e}, F {d_f:e}, focus {d_focus:e}");
+    // Float atomics reorder sums (rounding); restarting the lens model's Adam moments instead
+    // moves h_θ's weights by ~1e-3 in ten steps (the kernel learning rate).
+    assert!(
+        d_means < 1e-4 && d_mlp < 1e-5 && d_f < 1e-5 && d_focus < 1e-6,
+        "means {d_means}, h_θ {d_mlp}, F {d_f}, focus {d_focus}"
+    );
+    // Asking for another lens layout is refused, naming both.
+    let mut other = config();
+    if let Some(c) = other.coc.as_mut() {
+        c.compositor_channels = 8;
+    }
+    let err = Trainer::resume(ctx, &loaded, &s.train, other)
+        .err()
+        .expect("a different compositor width must be refused")
+        .to_string();
+    assert!(
+        err.contains("4 compositor channels") && err.contains("8 compositor channels"),
+        "{err}"
     );
 }

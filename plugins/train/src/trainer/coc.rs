@@ -5,7 +5,7 @@ use cocog_engine::coc::{CocKernels, CocStep, init_weights};
 use cocog_engine::nn::{Compositor, CompositorConfig};
 use cocog_engine::{AdamMoments, Batch, Camera, GpuBuffer, GpuContext, ImageSpec, ParamBuffers};
 
-use crate::{CocTrainConfig, TrainError};
+use crate::{CocCheckpoint, CocTrainConfig, FocusState, MomentState, TrainError};
 
 /// Per training view, the focus distance d_F = values[view] × scale. The released code learns
 /// d_F / (largest camera-to-Gaussian distance), so one learning rate suits any scene scale.
@@ -56,6 +56,82 @@ impl CocState {
             batch: None,
             config,
         }
+    }
+
+    /// The lens model of a checkpoint, which must have the layout `config` asks for.
+    pub fn restore(
+        ctx: &GpuContext,
+        config: CocTrainConfig,
+        k: &CocCheckpoint,
+    ) -> Result<Self, TrainError> {
+        let net = config.net;
+        let want = (
+            net.variant.name(),
+            net.copies,
+            net.width,
+            net.centred,
+            config.compositor_channels,
+        );
+        let have = (
+            k.variant.as_str(),
+            k.copies,
+            k.width,
+            k.centred,
+            k.compositor_channels,
+        );
+        if want != have {
+            return Err(TrainError::Invalid(format!(
+                "the checkpoint's lens model is (variant {}, {} copies, width {}, centred {}, \
+                 {} compositor channels); this run asks for (variant {}, {} copies, width {}, \
+                 centred {}, {} compositor channels)",
+                have.0, have.1, have.2, have.3, have.4, want.0, want.1, want.2, want.3, want.4
+            )));
+        }
+        let mut state = Self::new(ctx, config, 0);
+        let (mlp_len, f_len) = (net.mlp().len, state.compositor.layout().len);
+        if k.mlp.len() != mlp_len || k.compositor.len() != f_len {
+            return Err(TrainError::Invalid(format!(
+                "the checkpoint's lens model has {} h_θ and {} compositor parameters, the \
+                 layout needs {mlp_len} and {f_len}",
+                k.mlp.len(),
+                k.compositor.len()
+            )));
+        }
+        state.weights = ctx.storage_from("coc weights", &k.mlp);
+        state.weights_m = upload(ctx, &k.mlp_moments);
+        state.f_params = ctx.storage_from("compositor params", &k.compositor);
+        state.f_m = upload(ctx, &k.compositor_moments);
+        state.focus = k.focus.as_ref().map(|f| Focus {
+            values: ctx.storage_from("focus", &f.values),
+            moments: upload(ctx, &f.moments),
+            scale: f.scale,
+        });
+        Ok(state)
+    }
+
+    /// Reads the lens model and its optimiser state back for a checkpoint.
+    pub fn checkpoint(&self, ctx: &GpuContext, views: usize) -> Result<CocCheckpoint, TrainError> {
+        let net = &self.config.net;
+        let focus = match &self.focus {
+            Some(f) => Some(FocusState {
+                values: ctx.read(&f.values, views)?,
+                moments: download(ctx, &f.moments)?,
+                scale: f.scale,
+            }),
+            None => None,
+        };
+        Ok(CocCheckpoint {
+            variant: net.variant.name().to_owned(),
+            copies: net.copies,
+            width: net.width,
+            centred: net.centred,
+            compositor_channels: self.config.compositor_channels,
+            mlp: ctx.read(&self.weights, net.mlp().len)?,
+            mlp_moments: download(ctx, &self.weights_m)?,
+            compositor: ctx.read(&self.f_params, self.compositor.layout().len)?,
+            compositor_moments: download(ctx, &self.f_m)?,
+            focus,
+        })
     }
 
     pub fn sets(&self) -> u32 {
@@ -146,6 +222,22 @@ impl CocState {
             .map(|x| f64::from(*x) * f64::from(f.scale))
             .collect())
     }
+}
+
+fn upload(ctx: &GpuContext, s: &MomentState) -> AdamMoments {
+    AdamMoments {
+        len: s.m.len() as u32,
+        m: ctx.storage_from("adam m", &s.m),
+        v: ctx.storage_from("adam v", &s.v),
+    }
+}
+
+fn download(ctx: &GpuContext, m: &AdamMoments) -> Result<MomentState, TrainError> {
+    let len = m.len as usize;
+    Ok(MomentState {
+        m: ctx.read(&m.m, len)?,
+        v: ctx.read(&m.v, len)?,
+    })
 }
 
 /// The camera centre in world coordinates (the translation of `world_from_camera`).

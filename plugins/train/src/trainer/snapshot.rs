@@ -48,6 +48,10 @@ impl<'c> Trainer<'c> {
             rng: self.rng.state(),
             order_rng,
             order_stack: stack.iter().map(|&v| v as u32).collect(),
+            coc: match &self.coc {
+                Some(c) => Some(c.checkpoint(ctx, self.cameras.len())?),
+                None => None,
+            },
         })
     }
 
@@ -96,6 +100,7 @@ impl<'c> Trainer<'c> {
             ),
             iteration: state.iteration,
             params,
+            coc: state.coc.clone(),
         };
         Self::assemble(ctx, views, config, resumed)
     }
