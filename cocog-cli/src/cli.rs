@@ -97,6 +97,19 @@ pub enum Command {
     /// Measure training speed on this machine: it/s, ms per iteration split into forward /
     /// backward / optimizer / density control, Gaussian count, peak GPU and host memory.
     Bench(BenchArgs),
+    /// The lens learned for every training photo (focus distance, aperture), beside the true
+    /// one when the dataset records it
+    Lens(LensArgs),
+}
+
+#[derive(Args)]
+pub struct LensArgs {
+    /// A scene trained with --method cocog.
+    pub scene: PathBuf,
+    /// A transforms.json with per-frame `focus_distance_m` (and `aperture_radius_m`) to
+    /// compare with. Default: the one beside the photos' folder, when there is one.
+    #[arg(long)]
+    pub truth: Option<PathBuf>,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -276,6 +289,10 @@ pub struct TrainArgs {
     /// a circle of confusion sits around its in-focus point.
     #[arg(long = "coc-centred")]
     pub coc_centred: bool,
+    /// cocog: scale of h_θ's initial head weights (1 = PyTorch's default; smaller starts the
+    /// CoC Gaussians near their base instead of scattered).
+    #[arg(long = "coc-head-init", value_parser = finite)]
+    pub coc_head_init: Option<f64>,
     /// Train on images downscaled by N (intrinsics scaled to match). Default 1.
     #[arg(long)]
     pub downscale: Option<u32>,
@@ -308,8 +325,13 @@ pub struct TrainArgs {
 #[derive(Clone, Copy, ValueEnum)]
 pub enum SchedulePreset {
     /// INRIA's rules without the large-Gaussian prune, which on forward-facing captures
-    /// deletes the background after the first opacity reset (measured: BENCHMARKS.md).
+    /// deletes the background after the first opacity reset (measured: BENCHMARKS.md); the
+    /// default of --method 3dgs.
     Auto,
+    /// CoCoGaussian's released code (Deblurring 3DGS's density control): densify until
+    /// 20000, no opacity reset, depth-weighted pruning (range 3), D-SSIM weight 0.25, position
+    /// learning rate 3.2e-4; the default of --method cocog.
+    Deblur,
     /// INRIA 3DGS (2023) exactly, for comparison.
     Inria,
 }
@@ -319,7 +341,7 @@ pub enum SchedulePreset {
 #[derive(Args)]
 #[command(next_help_heading = "Density schedule")]
 pub struct ScheduleArgs {
-    /// Preset for every constant below. Default auto.
+    /// Preset for every constant below. Default: deblur for --method cocog, auto for 3dgs.
     #[arg(long, value_enum)]
     pub schedule: Option<SchedulePreset>,
     /// What the position learning rate and the world-space rules (clone/split boundary,
@@ -360,6 +382,17 @@ pub struct ScheduleArgs {
     /// Raise the spherical-harmonics degree every N iterations. Default 1000.
     #[arg(long = "sh-every")]
     pub sh_every: Option<u64>,
+    /// Divide the prune threshold by up to this for the farthest Gaussians (depth along the
+    /// cameras' mean viewing direction); 1 prunes uniformly. Default 1 (auto, inria), 3 (deblur).
+    #[arg(long = "depth-prune-range", value_parser = finite)]
+    pub depth_prune_range: Option<f64>,
+    /// Weight of D-SSIM in the loss. Default 0.2 (auto, inria), 0.25 (deblur).
+    #[arg(long = "lambda-dssim", value_parser = finite)]
+    pub lambda_dssim: Option<f64>,
+    /// Initial position learning rate × scene scale, decayed 100× over the run. Default 1.6e-4
+    /// (auto, inria), 3.2e-4 (deblur).
+    #[arg(long = "position-lr", value_parser = finite)]
+    pub position_lr: Option<f64>,
 }
 
 /// A duration in seconds: finite and not negative.
@@ -401,6 +434,18 @@ pub struct ExportArgs {
 }
 
 #[derive(Args)]
+#[command(
+    after_help = "Refocusing (scenes trained with --method cocog): the learned lens \
+model renders any view with a chosen depth of field. Focus distances are in scene units \
+(metres where the poses are metric), measured from the camera centre; --aperture multiplies \
+the learned aperture of the training photos (1 = as photographed, 0 = exactly the sharp \
+render, 2 = twice the blur). Examples:
+  cocog render t -o r --split train --as-photographed    each photo's own learned lens
+  cocog render t -o r --focus-distance 0.8 --aperture 1.5
+  cocog render t -o r --focus-distance from:003.png      the focus of training photo 003
+  cocog render t -o r --focus-at 200,150                 focus on what pixel (200,150) sees
+  cocog render t --views 000 --focus-sweep 0.5:3:24 -o pull.gif   a focus pull"
+)]
 pub struct RenderArgs {
     #[command(flatten)]
     pub io: SceneToScene,
@@ -413,13 +458,32 @@ pub struct RenderArgs {
     /// Background colour R,G,B in 0..1. Default 0,0,0 (what training composites over).
     #[arg(long)]
     pub background: Option<String>,
-    /// Refocus: plane in focus, in scene units. Needs a CoCoGaussian model, which
-    /// `train --method cocog` does not produce yet, so this is refused for now.
-    #[arg(long = "focus-distance", value_parser = finite)]
-    pub focus_distance: Option<f64>,
-    /// Refocus: aperture scale K of the CoC model (refused for now, like --focus-distance).
+    /// Only these views: comma-separated names or stems (e.g. 000,008). Default: the split.
+    #[arg(long)]
+    pub views: Option<String>,
+    /// Refocus: the distance in focus from the camera centre, in scene units, or
+    /// from:VIEW for a training photo's learned focus distance (and aperture).
+    #[arg(long = "focus-distance")]
+    pub focus_distance: Option<String>,
+    /// Refocus: focus each view on the surface under its pixel X,Y (the render's depth).
+    #[arg(long = "focus-at")]
+    pub focus_at: Option<String>,
+    /// Refocus: every training view through its own learned focus and aperture, i.e. what
+    /// the model thinks the photo looked like (views without a learned lens render sharp).
+    #[arg(long = "as-photographed")]
+    pub as_photographed: bool,
+    /// Refocus: multiplies the learned aperture (1 = as photographed, 0 = sharp). Default 1.
     #[arg(long, value_parser = finite)]
     pub aperture: Option<f64>,
+    /// Refocus: blend the CoC renders with the learned compositor (learned) or average them
+    /// (mean). Default learned.
+    #[arg(long)]
+    pub composite: Option<String>,
+    /// A focus pull over one view (--views NAME): NEAR:FAR:FRAMES, focus distances even in
+    /// 1/distance (as a lens's focus ring). -o FILE.gif writes an animation, FILE.mp4 needs
+    /// ffmpeg on PATH, a folder gets the frames as PNG.
+    #[arg(long = "focus-sweep")]
+    pub focus_sweep: Option<String>,
     /// Also write depth/<view>.exr: expected depth along the optical axis divided by the
     /// pixel's alpha, 0 where nothing was seen.
     #[arg(long)]

@@ -115,6 +115,7 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
                 "composite_start" => a.composite_start,
                 "compositor_channels" => a.compositor_channels,
                 "coc_centred" => a.coc_centred.then_some(true),
+                "coc_head_init" => a.coc_head_init,
                 "sh_degree" => a.sh_degree,
                 "random_background" => a.random_background.then_some(true),
                 "resume" => a.resume.as_ref().map(|p| p.display().to_string()),
@@ -125,6 +126,7 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
             let s = &a.schedule;
             let preset = s.schedule.map(|p| match p {
                 SchedulePreset::Auto => "auto",
+                SchedulePreset::Deblur => "deblur",
                 SchedulePreset::Inria => "inria",
             });
             o.extend(options! {
@@ -133,7 +135,8 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
                 "densify_every" => s.densify_every, "densify_grad" => s.densify_grad,
                 "percent_dense" => s.percent_dense, "prune_opacity" => s.prune_opacity,
                 "prune_large" => s.prune_large, "opacity_reset_every" => s.opacity_reset_every,
-                "sh_every" => s.sh_every,
+                "sh_every" => s.sh_every, "depth_prune_range" => s.depth_prune_range,
+                "lambda_dssim" => s.lambda_dssim, "position_lr" => s.position_lr,
             });
             run("train", &a.io.scene, &a.io.output, o)
         }
@@ -156,10 +159,16 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
         Command::Render(a) => {
             let o = options! {
                 "split" => a.split.clone(), "downscale" => a.downscale,
-                "background" => a.background.clone(), "focus_distance" => a.focus_distance,
-                "aperture" => a.aperture, "depth" => a.depth.then_some(true),
+                "background" => a.background.clone(),
+                "focus_distance" => a.focus_distance.clone(), "focus_at" => a.focus_at.clone(),
+                "as_photographed" => a.as_photographed.then_some(true),
+                "aperture" => a.aperture, "composite" => a.composite.clone(),
+                "views" => a.views.clone(), "depth" => a.depth.then_some(true),
             };
-            run("render", &a.io.scene, &a.io.output, o)
+            match &a.focus_sweep {
+                Some(sweep) => crate::sweep::run(&registry, a, sweep, o, g, ctx),
+                None => run("render", &a.io.scene, &a.io.output, o),
+            }
         }
         Command::Eval(a) => eval(&registry, a, g, ctx),
         Command::Convert(a) => {
@@ -206,6 +215,7 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
         Command::Plugins => plugins::list(&registry, g.json, g.verbose),
         Command::Demo(a) => demo::run(&registry, a, g, ctx),
         Command::Bench(a) => bench(a, g, ctx),
+        Command::Lens(a) => crate::lens::run(a, g),
     }
 }
 

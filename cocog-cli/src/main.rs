@@ -5,8 +5,10 @@ mod builtins;
 mod cli;
 mod commands;
 mod demo;
+mod lens;
 mod plugins;
 mod progress;
+mod sweep;
 
 use std::process::ExitCode;
 use std::sync::Arc;

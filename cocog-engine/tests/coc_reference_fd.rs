@@ -50,6 +50,8 @@ struct Case {
     base: Base,
     camera: [f64; 3],
     focus: f64,
+    /// The lens variant's per-photo aperture a (K = a·d).
+    aperture: f64,
     probe: Probe,
 }
 
@@ -95,6 +97,7 @@ impl Case {
             base,
             camera: [0.05, -0.02, -0.1],
             focus: 2.3,
+            aperture: 1.2,
             probe: Probe::new(hl.copies + 1, &mut rng),
         }
     }
@@ -103,8 +106,17 @@ impl Case {
         mlp_forward(&self.ml, weights, input(&self.base, self.camera)).heads
     }
 
-    fn loss(&self, base: &Base, heads: &[f64], focus: f64) -> f64 {
+    /// The base's distance from the camera (detached, like the gate's).
+    fn depth(&self) -> f64 {
+        (0..3)
+            .map(|k| (self.base.mean[k] - self.camera[k]).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    }
+
+    fn loss_with(&self, base: &Base, heads: &[f64], focus: f64, aperture: f64) -> f64 {
         let (c, _) = gate(self.base.mean, self.camera, focus);
+        let k = aperture * self.depth();
         self.probe.loss(&expand(
             self.variant,
             self.centred,
@@ -112,11 +124,16 @@ impl Case {
             base,
             heads,
             c,
+            k,
         ))
     }
 
-    /// Every analytic gradient: weights, heads, base (as one Expanded), focus.
-    fn analytic(&self) -> (Vec<f64>, Vec<f64>, Expanded, f64) {
+    fn loss(&self, base: &Base, heads: &[f64], focus: f64) -> f64 {
+        self.loss_with(base, heads, focus, self.aperture)
+    }
+
+    /// Every analytic gradient: weights, heads, base (as one Expanded), focus, aperture.
+    fn analytic(&self) -> (Vec<f64>, Vec<f64>, Expanded, f64, f64) {
         let trace = mlp_forward(&self.ml, &self.weights, input(&self.base, self.camera));
         let (c, dc_dfocus) = gate(self.base.mean, self.camera, self.focus);
         let g = expand_backward(
@@ -126,11 +143,19 @@ impl Case {
             &self.base,
             &trace.heads,
             c,
+            self.aperture * self.depth(),
             &self.probe.coef,
         );
         let mut v_weights = vec![0.0; self.ml.len];
         mlp_backward(&self.ml, &self.weights, &trace, &g.v_heads, &mut v_weights);
-        (v_weights, g.v_heads, g.base, g.v_gate * dc_dfocus)
+        let v_aperture = g.v_lens_k * self.depth();
+        (
+            v_weights,
+            g.v_heads,
+            g.base,
+            g.v_gate * dc_dfocus,
+            v_aperture,
+        )
     }
 }
 
@@ -180,7 +205,7 @@ fn run(variant: CocVariant, centred: bool, seed: u64) {
     let case = Case::new(variant, centred, seed);
     assert_well_posed(&case);
     let heads = case.heads(&case.weights);
-    let (v_weights, v_heads, v_base, v_focus) = case.analytic();
+    let (v_weights, v_heads, v_base, v_focus, v_aperture) = case.analytic();
 
     for i in 0..case.ml.len {
         let fd = central(
@@ -229,6 +254,17 @@ fn run(variant: CocVariant, centred: bool, seed: u64) {
             );
         }
     }
+    let fd = central(
+        |a| case.loss_with(&case.base, &heads, case.focus, a),
+        case.aperture,
+    );
+    check(&format!("{} aperture", variant.name()), v_aperture, fd);
+    if variant == CocVariant::Lens {
+        assert!(
+            v_aperture.abs() > 1e-3,
+            "the aperture gradient must be exercised"
+        );
+    }
     let fd = central(|f| case.loss(&case.base, &heads, f), case.focus);
     check(&format!("{} focus distance", variant.name()), v_focus, fd);
     assert!(
@@ -249,10 +285,16 @@ fn paper_variant_matches_finite_differences() {
     run(CocVariant::Paper, true, 24);
 }
 
+#[test]
+fn lens_variant_matches_finite_differences() {
+    run(CocVariant::Lens, false, 31);
+    run(CocVariant::Lens, true, 32);
+}
+
 /// Centred copies average to the base: the circle of confusion sits on the in-focus point.
 #[test]
 fn centred_copies_average_to_the_base() {
-    for variant in [CocVariant::Code, CocVariant::Paper] {
+    for variant in [CocVariant::Code, CocVariant::Paper, CocVariant::Lens] {
         let case = Case::new(variant, true, 6);
         let (c, _) = gate(case.base.mean, case.camera, case.focus);
         assert!(c > 0.1, "the gate must be open: {c}");
@@ -263,6 +305,7 @@ fn centred_copies_average_to_the_base() {
             &case.base,
             &case.heads(&case.weights),
             c,
+            case.aperture * case.depth(),
         );
         let copies = &sets[..case.hl.copies];
         for k in 0..3 {
@@ -277,7 +320,7 @@ fn centred_copies_average_to_the_base() {
 /// In focus (d = d_F) the gate closes: copies coincide with the base, nothing is modulated.
 #[test]
 fn in_focus_gaussians_do_not_spread() {
-    for variant in [CocVariant::Code, CocVariant::Paper] {
+    for variant in [CocVariant::Code, CocVariant::Paper, CocVariant::Lens] {
         let case = Case::new(variant, false, 5);
         let d = (0..3)
             .map(|k| (case.base.mean[k] - case.camera[k]).powi(2))
@@ -292,6 +335,7 @@ fn in_focus_gaussians_do_not_spread() {
             &case.base,
             &case.heads(&case.weights),
             c,
+            case.aperture * case.depth(),
         );
         let n = case.base.quat.iter().map(|v| v * v).sum::<f64>().sqrt();
         for s in sets {

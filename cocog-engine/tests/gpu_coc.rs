@@ -1,7 +1,8 @@
 //! The CoC kernels against the f64 reference, per scalar: h_θ's heads, the M + 1 expanded
 //! sets, the base gradients summed over the sets, every weight gradient of h_θ and the focus
-//! distance's gradient, for both variants at the real width (64) and more Gaussians than one
-//! weight-gradient chunk holds.
+//! distance's (and the lens variant's aperture's) gradient, for every variant at the real
+//! width (64), in a normalised frame with an origin and a scale that are not 0 and 1, over
+//! more Gaussians than one matrix-product tile or reduction part holds.
 
 mod common;
 
@@ -17,13 +18,21 @@ const N: usize = 1100;
 const VIEWS: usize = 3;
 const VIEW: u32 = 1;
 const CAMERA: [f64; 3] = [0.05, -0.02, -0.1];
-const FOCUS_SCALE: f64 = 2.0;
+/// The frame: world = ORIGIN + SCALE × normalised.
+const ORIGIN: [f64; 3] = [0.3, -0.2, 0.5];
+const SCALE: f64 = 2.0;
+const APERTURES: [f32; 3] = [0.02, 0.05, 0.08];
+
+fn to_world(p: [f64; 3]) -> [f64; 3] {
+    [0, 1, 2].map(|k| ORIGIN[k] + SCALE * p[k])
+}
 
 struct Inputs {
+    /// In the normalised frame (what the reference computes in).
     bases: Vec<Base>,
     weights: Vec<f32>,
     focus: Vec<f32>,
-    /// Gradient of every expanded set, `[set][base]`.
+    /// Gradient of every expanded set in world units, `[set][base]`.
     v_sets: Vec<Expanded>,
 }
 
@@ -55,7 +64,7 @@ fn inputs(config: &CocConfig, seed: u64) -> Inputs {
     Inputs {
         bases,
         weights,
-        focus: vec![0.9, 1.15, 1.4],
+        focus: vec![0.45, 0.575, 0.7],
         v_sets,
     }
 }
@@ -79,15 +88,24 @@ struct Gpu {
     v_base: [Vec<f32>; 3],
     v_weights: Vec<f32>,
     v_focus: Vec<f32>,
+    v_aperture: Vec<f32>,
 }
 
 fn run_gpu(ctx: &GpuContext, config: CocConfig, inp: &Inputs) -> Gpu {
     let kernels = CocKernels::new(ctx, config);
-    let means = ctx.storage_from("means", &flat(inp.bases.iter().map(|b| b.mean)));
-    let log_scales = ctx.storage_from("log-scales", &flat(inp.bases.iter().map(|b| b.log_scale)));
+    let means = ctx.storage_from("means", &flat(inp.bases.iter().map(|b| to_world(b.mean))));
+    let log_scales = ctx.storage_from(
+        "log-scales",
+        &flat(
+            inp.bases
+                .iter()
+                .map(|b| b.log_scale.map(|l| l + SCALE.ln())),
+        ),
+    );
     let quats = ctx.storage_from("quats", &flat(inp.bases.iter().map(|b| b.quat)));
     let weights = ctx.storage_from("weights", &inp.weights);
     let focus = ctx.storage_from("focus", &inp.focus);
+    let apertures = ctx.storage_from("apertures", &APERTURES);
     let v_means = ctx.storage_from("v set means", &flat(inp.v_sets.iter().map(|v| v.mean)));
     let v_ls = ctx.storage_from(
         "v set log-scales",
@@ -96,8 +114,10 @@ fn run_gpu(ctx: &GpuContext, config: CocConfig, inp: &Inputs) -> Gpu {
     let v_quats = ctx.storage_from("v set quats", &flat(inp.v_sets.iter().map(|v| v.quat)));
     let step = CocStep {
         view: VIEW,
-        camera_centre: CAMERA.map(|v| v as f32),
-        focus_scale: FOCUS_SCALE as f32,
+        camera_centre: to_world(CAMERA).map(|v| v as f32),
+        focus_scale: SCALE as f32,
+        origin: ORIGIN.map(|v| v as f32),
+        aperture: 1.0,
     };
     let mut ws = Workspace::default();
     let mut rec = ctx.recorder();
@@ -110,6 +130,7 @@ fn run_gpu(ctx: &GpuContext, config: CocConfig, inp: &Inputs) -> Gpu {
         &log_scales,
         &quats,
         &focus,
+        &apertures,
         n,
         &step,
     );
@@ -151,6 +172,7 @@ fn run_gpu(ctx: &GpuContext, config: CocConfig, inp: &Inputs) -> Gpu {
         ],
         v_weights: read(&g.v_weights, config.mlp().len),
         v_focus: read(&g.v_focus, VIEWS),
+        v_aperture: read(&g.v_aperture, VIEWS),
     }
 }
 
@@ -179,7 +201,8 @@ fn check(variant: CocVariant, centred: bool, seed: u64) {
     let (hl, ml) = (config.heads(), config.mlp());
     let w64: Vec<f64> = inp.weights.iter().map(|&v| f64::from(v)).collect();
     let w_abs: Vec<f64> = w64.iter().map(|v| v.abs()).collect();
-    let focus = f64::from(inp.focus[VIEW as usize]) * FOCUS_SCALE;
+    let focus = f64::from(inp.focus[VIEW as usize]);
+    let aperture = f64::from(APERTURES[VIEW as usize]);
     let sets = hl.copies + 1;
 
     let mut v_weights = vec![0.0; ml.len];
@@ -187,6 +210,7 @@ fn check(variant: CocVariant, centred: bool, seed: u64) {
     // gives each scalar an f32 rounding budget of its own.
     let mut v_weights_bound = vec![0.0; ml.len];
     let (mut v_focus, mut v_focus_bound) = (0.0, 0.0);
+    let (mut v_aperture, mut v_aperture_bound) = (0.0, 0.0);
     let mut open = 0;
     for (i, base) in inp.bases.iter().enumerate() {
         let want = mlp_forward(&ml, &w64, input(base, CAMERA));
@@ -211,35 +235,50 @@ fn check(variant: CocVariant, centred: bool, seed: u64) {
             }
         }
         let (c, dc) = gate(base.mean, CAMERA, focus);
-        let expanded = expand(variant, centred, &hl, base, &want.heads, c);
+        let depth = (0..3)
+            .map(|k| (base.mean[k] - CAMERA[k]).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        let lens_k = aperture * depth;
+        let expanded = expand(variant, centred, &hl, base, &want.heads, c, lens_k);
         for (m, e) in expanded.iter().enumerate() {
             let o = m * inp.bases.len() + i;
-            for k in 0..3 {
+            for (k, w) in to_world(e.mean).into_iter().enumerate() {
                 close(
                     "set mean",
                     gpu.sets[0][3 * o + k],
-                    e.mean[k],
-                    1e-5 * (1.0 + e.mean[k].abs()),
+                    w,
+                    1e-5 * (1.0 + w.abs()),
                 );
+                let ls = e.log_scale[k] + SCALE.ln();
                 close(
                     "set log-scale",
                     gpu.sets[1][3 * o + k],
-                    e.log_scale[k],
-                    1e-5 * (1.0 + e.log_scale[k].abs()),
+                    ls,
+                    1e-5 * (1.0 + ls.abs()),
                 );
             }
             for k in 0..4 {
                 close("set quat", gpu.sets[2][4 * o + k], e.quat[k], 1e-5);
             }
         }
-        let v: Vec<Expanded> = (0..sets).map(|m| inp.v_sets[m * N + i]).collect();
-        let g = expand_backward(variant, centred, &hl, base, &trace.heads, c, &v);
+        // The reference's sets are normalised: a world mean gradient is SCALE × theirs.
+        let v: Vec<Expanded> = (0..sets)
+            .map(|m| {
+                let w = inp.v_sets[m * N + i];
+                Expanded {
+                    mean: w.mean.map(|g| g * SCALE),
+                    ..w
+                }
+            })
+            .collect();
+        let g = expand_backward(variant, centred, &hl, base, &trace.heads, c, lens_k, &v);
         open += g.v_heads.iter().filter(|v| **v != 0.0).count();
         for k in 0..3 {
             close(
                 "v base mean",
                 gpu.v_base[0][3 * i + k],
-                g.base.mean[k],
+                g.base.mean[k] / SCALE,
                 1e-5 * sets as f64,
             );
             close(
@@ -257,9 +296,12 @@ fn check(variant: CocVariant, centred: bool, seed: u64) {
                 1e-4 * (1.0 + g.base.quat[k].abs()),
             );
         }
-        // The focus buffer holds d_F / FOCUS_SCALE: its gradient is FOCUS_SCALE × d loss / d d_F.
-        v_focus += g.v_gate * dc * FOCUS_SCALE;
-        v_focus_bound += (g.v_gate * dc * FOCUS_SCALE).abs();
+        // The focus buffer holds the normalised d_F, the reference's own parameter.
+        v_focus += g.v_gate * dc;
+        v_focus_bound += (g.v_gate * dc).abs();
+        // K = a·d.
+        v_aperture += g.v_lens_k * depth;
+        v_aperture_bound += (g.v_lens_k * depth).abs();
         mlp_backward(&ml, &w64, &trace, &g.v_heads, &mut v_weights);
         let abs_trace = MlpTrace {
             layers: trace
@@ -294,6 +336,18 @@ fn check(variant: CocVariant, centred: bool, seed: u64) {
         v_focus.abs() > 1e-3 * v_focus_bound,
         "focus gradient must not cancel out"
     );
+    close(
+        "v aperture",
+        gpu.v_aperture[VIEW as usize],
+        v_aperture,
+        1e-6 + 2e-5 * v_aperture_bound,
+    );
+    if variant == CocVariant::Lens {
+        assert!(
+            v_aperture.abs() > 1e-3 * v_aperture_bound,
+            "aperture gradient must not cancel out"
+        );
+    }
     for (view, v) in gpu.v_focus.iter().enumerate() {
         if view != VIEW as usize {
             assert_eq!(*v, 0.0, "only the step's view gets a focus gradient");
@@ -311,6 +365,12 @@ fn code_variant_matches_the_reference() {
 fn paper_variant_matches_the_reference() {
     check(CocVariant::Paper, false, 4);
     check(CocVariant::Paper, true, 14);
+}
+
+#[test]
+fn lens_variant_matches_the_reference() {
+    check(CocVariant::Lens, false, 5);
+    check(CocVariant::Lens, true, 15);
 }
 
 /// Opacity and SH gradients of the sets sum into their base.

@@ -15,7 +15,7 @@ use crate::atomic;
 
 pub const FORMAT: &str = "cocog.scene";
 pub const MAJOR: u32 = 1;
-pub const MINOR: u32 = 0;
+pub const MINOR: u32 = 1;
 pub const MANIFEST: &str = "scene.json";
 
 #[derive(Debug, thiserror::Error)]
@@ -58,9 +58,11 @@ pub enum Split {
 /// A thin-lens state for one view: learned by CoCoGaussian, or known (synthetic data).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Lens {
-    /// Distance of the plane in focus, in scene units along the optical axis.
+    /// Distance in focus, in scene units (CoCoGaussian measures it from the camera centre;
+    /// datasets along the optical axis, which agree at the image centre).
     pub focus_distance: f64,
-    /// Aperture scale K of the circle-of-confusion model (pixels × scene units).
+    /// Diameter of the aperture in scene units, as in the thin lens's circle of confusion
+    /// of fx·A·|1/d − 1/d_F| pixels (learned by the lens variant only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub aperture: Option<f64>,
 }
@@ -120,6 +122,10 @@ pub struct Scene {
     /// Trained Gaussians (INRIA 3DGS PLY), relative to the scene dir.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gaussians: Option<String>,
+    /// CoCoGaussian's lens model (`lens-model.safetensors`: h_θ, F, learned focus distances),
+    /// which refocused renders need; since 1.1.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lens_model: Option<String>,
     #[serde(default)]
     pub history: Vec<HistoryEntry>,
 }
@@ -135,6 +141,7 @@ impl Default for Scene {
             up: None,
             points: None,
             gaussians: None,
+            lens_model: None,
             history: Vec::new(),
         }
     }

@@ -8,6 +8,7 @@ pub mod error;
 pub mod exr_map;
 pub mod glb;
 pub mod images;
+pub mod lens_model;
 pub mod llff;
 pub mod nerf;
 mod npy_header;

@@ -7,7 +7,8 @@
 @group(0) @binding(1) var<storage, read> quats: array<f32>;
 // [Gaussian][HEADS], the forward's heads.
 @group(0) @binding(2) var<storage, read> heads: array<f32>;
-@group(0) @binding(3) var<storage, read> gates: array<f32>;
+// Per Gaussian: c, ∂c/∂focus[view], the normalised depth d, the aperture K.
+@group(0) @binding(3) var<storage, read> gates: array<vec4<f32>>;
 @group(0) @binding(4) var<storage, read> v_set_means: array<f32>;
 @group(0) @binding(5) var<storage, read> v_set_log_scales: array<f32>;
 @group(0) @binding(6) var<storage, read> v_set_quats: array<f32>;
@@ -16,8 +17,8 @@
 @group(0) @binding(9) var<storage, read_write> v_quats: array<f32>;
 // [Gaussian][HEADS]: ∂loss/∂heads.
 @group(0) @binding(10) var<storage, read_write> d_heads: array<f32>;
-// Per Gaussian, its share of ∂loss/∂focus[view].
-@group(0) @binding(11) var<storage, read_write> focus_terms: array<f32>;
+// Per Gaussian, its shares of ∂loss/∂focus[view] and (lens variant) ∂loss/∂aperture[view].
+@group(0) @binding(11) var<storage, read_write> focus_terms: array<vec2<f32>>;
 
 @compute @workgroup_size(64)
 fn backward(
@@ -31,7 +32,10 @@ fn backward(
     }
     let hh = g * HEADS;
     let dh = g * HEADS;
-    let c = gates[2u * g];
+    let gate = gates[g];
+    let c = gate.x;
+    let aperture_k = gate.w;
+    var v_k = 0.0;
     let q = vec4<f32>(quats[4u * g], quats[4u * g + 1u], quats[4u * g + 2u], quats[4u * g + 3u]);
     let norm = length(q);
     let unit = q / norm;
@@ -39,7 +43,8 @@ fn backward(
     for (var j = 0u; j < HEADS; j++) {
         d_heads[dh + j] = 0.0;
     }
-    // Centring subtracts the copies' mean offset: each offset's gradient loses their mean.
+    // Offsets are D × normalised ones, whose gradient is D × the world one; centring
+    // subtracts the copies' mean offset, so each offset's gradient loses their mean.
     var g_mean = vec3<f32>(0.0);
     if CENTRED {
         for (var m = 0u; m < M; m++) {
@@ -75,19 +80,17 @@ fn backward(
             continue;
         }
         let raw = vec3<f32>(heads[hh + H_POS + 3u * m], heads[hh + H_POS + 3u * m + 1u], heads[hh + H_POS + 3u * m + 2u]);
-        let g_off = gm - g_mean;
-        if PAPER {
-            let ha = heads[hh + H_APERTURE];
+        let g_off = step.scale * (gm - g_mean);
+        if PAPER || LENS {
             let hb = heads[hh + H_BETA + m];
-            let aperture = softplus(ha);
             let beta = sigmoid(hb);
             let len = max(length(raw), 1e-12);
             let dir = raw / len;
             let dot_g = dot(dir, g_off);
-            d_heads[dh + H_APERTURE] += 0.5 * c * beta * dot_g * sigmoid(ha);
-            d_heads[dh + H_BETA + m] += 0.5 * aperture * c * dot_g * beta * (1.0 - beta);
-            v_gate += 0.5 * aperture * beta * dot_g;
-            let v_raw = 0.5 * aperture * c * beta * (g_off - dir * dot_g) / len;
+            v_k += 0.5 * c * beta * dot_g;
+            d_heads[dh + H_BETA + m] += 0.5 * aperture_k * c * dot_g * beta * (1.0 - beta);
+            v_gate += 0.5 * aperture_k * beta * dot_g;
+            let v_raw = 0.5 * aperture_k * c * beta * (g_off - dir * dot_g) / len;
             d_heads[dh + H_POS + 3u * m] += v_raw.x;
             d_heads[dh + H_POS + 3u * m + 1u] += v_raw.y;
             d_heads[dh + H_POS + 3u * m + 2u] += v_raw.z;
@@ -106,5 +109,13 @@ fn backward(
     for (var k = 0u; k < 4u; k++) {
         v_quats[4u * g + k] = vq[k];
     }
-    focus_terms[g] = v_gate * gates[2u * g + 1u];
+    if PAPER {
+        d_heads[dh + H_APERTURE] = v_k * sigmoid(heads[hh + H_APERTURE]);
+    }
+    // The lens variant's K = a·d; the others have no per-photo aperture.
+    var v_a = 0.0;
+    if LENS {
+        v_a = v_k * gate.z;
+    }
+    focus_terms[g] = vec2<f32>(v_gate * gate.y, v_a);
 }

@@ -4,11 +4,16 @@
 struct Step {
     n: u32,
     view: u32,
-    // d_F = focus[view] · focus_scale (the released code learns focus / max depth).
-    focus_scale: f32,
-    pad0: u32,
+    // The scene scale D: h_θ sees lengths divided by it and positions measured from `origin`,
+    // so the same numbers in any unit; focus[view] is d_F / D and world offsets are D × the
+    // normalised ones.
+    scale: f32,
+    // Multiplies the gate: 1 as photographed, 0 a pinhole (refocused renders choose it).
+    aperture: f32,
     centre: vec3<f32>,
-    pad: u32,
+    pad0: u32,
+    origin: vec3<f32>,
+    pad1: u32,
 }
 
 const E: f32 = 2.718281828459045;

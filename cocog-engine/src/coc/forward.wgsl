@@ -15,8 +15,10 @@
 @group(0) @binding(7) var<storage, read_write> set_means: array<f32>;
 @group(0) @binding(8) var<storage, read_write> set_log_scales: array<f32>;
 @group(0) @binding(9) var<storage, read_write> set_quats: array<f32>;
-// Per Gaussian: the gate c and ∂c/∂focus[view].
-@group(0) @binding(10) var<storage, read_write> gates: array<f32>;
+// Per Gaussian: the gate c, ∂c/∂focus[view], the normalised depth d and the aperture K.
+@group(0) @binding(10) var<storage, read_write> gates: array<vec4<f32>>;
+// Per training view, the lens variant's aperture a (K = a·d).
+@group(0) @binding(11) var<storage, read> apertures: array<f32>;
 
 fn put_embedding(x: vec3<f32>, freqs: u32, at: u32) -> u32 {
     var k = at;
@@ -52,10 +54,10 @@ fn embed(
     if g >= step.n {
         return;
     }
-    var k = put_embedding(base_mean(g), MEAN_FREQS, g * IN_DIM);
-    k = put_embedding(step.centre, CAMERA_FREQS, k);
+    var k = put_embedding((base_mean(g) - step.origin) / step.scale, MEAN_FREQS, g * IN_DIM);
+    k = put_embedding((step.centre - step.origin) / step.scale, CAMERA_FREQS, k);
     for (var j = 0u; j < 3u; j++) {
-        inputs[k + j] = exp(log_scales[3u * g + j]);
+        inputs[k + j] = exp(log_scales[3u * g + j]) / step.scale;
     }
     let unit = base_unit_quat(g);
     for (var j = 0u; j < 4u; j++) {
@@ -76,22 +78,26 @@ fn expand(
     let mean = base_mean(g);
     let unit = base_unit_quat(g);
     let h = g * HEADS;
-    let dist = length(mean - step.centre);
-    let focus_distance = focus[step.view] * step.focus_scale;
+    let dist = length(mean - step.centre) / step.scale;
+    let focus_distance = focus[step.view];
     let diff = 1.0 / dist - 1.0 / focus_distance;
-    let c = abs(diff);
-    gates[2u * g] = c;
-    gates[2u * g + 1u] = sign(diff) / (focus_distance * focus_distance) * step.focus_scale;
+    let c = step.aperture * abs(diff);
+    var aperture_k = 0.0;
+    if LENS {
+        aperture_k = apertures[step.view] * dist;
+    } else if PAPER {
+        aperture_k = softplus(heads[h + H_APERTURE]);
+    }
+    gates[g] = vec4<f32>(c, step.aperture * sign(diff) / (focus_distance * focus_distance), dist, aperture_k);
 
-    // The copies' offsets, then (CENTRED) less their mean.
+    // The copies' offsets (normalised), then (CENTRED) less their mean.
     var shifts: array<vec3<f32>, M>;
     var mean_shift = vec3<f32>(0.0);
     for (var m = 0u; m < M; m++) {
         let raw = vec3<f32>(heads[h + H_POS + 3u * m], heads[h + H_POS + 3u * m + 1u], heads[h + H_POS + 3u * m + 2u]);
-        if PAPER {
-            let aperture = softplus(heads[h + H_APERTURE]);
+        if PAPER || LENS {
             let beta = sigmoid(heads[h + H_BETA + m]);
-            shifts[m] = 0.5 * aperture * c * beta * raw / max(length(raw), 1e-12);
+            shifts[m] = 0.5 * aperture_k * c * beta * raw / max(length(raw), 1e-12);
         } else {
             shifts[m] = c * raw;
         }
@@ -106,7 +112,7 @@ fn expand(
             }
         }
         let o = m * step.n + g;
-        let p = mean + shift;
+        let p = mean + step.scale * shift;
         set_means[3u * o] = p.x; set_means[3u * o + 1u] = p.y; set_means[3u * o + 2u] = p.z;
         for (var j = 0u; j < 3u; j++) {
             set_log_scales[3u * o + j] = log_scales[3u * g + j] + log(multiplier(c, heads[h + H_SCALE + 3u * m + j]).x);

@@ -5,6 +5,7 @@
 use super::layout::{CAMERA_FREQS, CocConfig, CocVariant, INPUT_DIM, MEAN_FREQS};
 use super::mlp::{MlpActivations, MlpKernels};
 use crate::core::{GpuBuffer, GpuContext, Kernel, Recorder, Workspace, shader};
+use crate::{ParamBuffers, sh_coeffs_per_channel};
 
 /// What changes per step: the view and its camera centre.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -12,8 +13,13 @@ pub struct CocStep {
     /// Index of the training view, into the focus buffer.
     pub view: u32,
     pub camera_centre: [f32; 3],
-    /// The focus buffer holds d_F / focus_scale (the released code learns d_F / max depth).
+    /// The scene scale D: h_θ sees lengths divided by it and positions measured from
+    /// `origin`; the focus buffer holds d_F / D (the released code learns d_F / max depth).
     pub focus_scale: f32,
+    pub origin: [f32; 3],
+    /// Multiplies every circle of confusion: 1 as photographed (training), 0 a pinhole;
+    /// refocused renders choose it.
+    pub aperture: f32,
 }
 
 #[repr(C)]
@@ -22,9 +28,11 @@ struct StepUniform {
     n: u32,
     view: u32,
     focus_scale: f32,
-    pad0: u32,
+    aperture: f32,
     centre: [f32; 3],
-    pad: u32,
+    pad0: u32,
+    origin: [f32; 3],
+    pad1: u32,
 }
 
 #[repr(C)]
@@ -43,7 +51,8 @@ pub struct CocExpansion {
     pub quats: GpuBuffer,
     /// h_θ's input, hidden activations and heads, one row per Gaussian.
     pub acts: MlpActivations,
-    /// Per Gaussian: the gate |1/d − 1/d_F| and its derivative in the focus parameter.
+    /// Per Gaussian: the gate |1/d − 1/d_F|, its derivative in the focus parameter, the
+    /// normalised depth and the aperture K (paper and lens variants).
     pub gates: GpuBuffer,
     pub num_gaussians: u32,
 }
@@ -57,6 +66,8 @@ pub struct CocGrads {
     pub v_quats: GpuBuffer,
     pub v_weights: GpuBuffer,
     pub v_focus: GpuBuffer,
+    /// The lens variant's per-view aperture (zero for the others).
+    pub v_aperture: GpuBuffer,
 }
 
 /// The compiled CoC kernels for one `CocConfig`.
@@ -77,13 +88,14 @@ fn prelude(config: &CocConfig) -> String {
     let width = config.width;
     let s = format!(
         "const M: u32 = {m}u;\nconst WIDTH: u32 = {width}u;\nconst HEADS: u32 = {heads}u;\n\
-         const PAPER: bool = {paper};\nconst CENTRED: bool = {centred};\nconst H_APERTURE: u32 = {ha}u;\nconst H_BETA: u32 = {hb}u;\n\
+         const PAPER: bool = {paper};\nconst LENS: bool = {lens};\nconst CENTRED: bool = {centred};\nconst H_APERTURE: u32 = {ha}u;\nconst H_BETA: u32 = {hb}u;\n\
          const H_POS: u32 = {hp}u;\nconst H_SCALE: u32 = {hs}u;\nconst H_ROT: u32 = {hr}u;\n\
          const IN_DIM: u32 = {INPUT_DIM}u;\nconst MEAN_FREQS: u32 = {MEAN_FREQS}u;\n\
          const CAMERA_FREQS: u32 = {CAMERA_FREQS}u;\n",
         m = hl.copies,
         heads = hl.len,
         paper = config.variant == CocVariant::Paper,
+        lens = config.variant == CocVariant::Lens,
         centred = config.centred,
         ha = hl.aperture.unwrap_or(0),
         hb = hl.beta.unwrap_or(0),
@@ -122,14 +134,17 @@ impl CocKernels {
             n,
             view: step.view,
             focus_scale: step.focus_scale,
-            pad0: 0,
+            aperture: step.aperture,
             centre: step.camera_centre,
-            pad: 0,
+            pad0: 0,
+            origin: step.origin,
+            pad1: 0,
         })
     }
 
     /// Records h_θ and the expansion of `n` base Gaussians for one view. `focus` holds one
-    /// value per training view.
+    /// value per training view, and so does `apertures` for the lens variant (any buffer
+    /// serves the others).
     pub fn encode_forward(
         &self,
         rec: &mut Recorder,
@@ -139,6 +154,7 @@ impl CocKernels {
         log_scales: &wgpu::Buffer,
         quats: &wgpu::Buffer,
         focus: &wgpu::Buffer,
+        apertures: &wgpu::Buffer,
         n: u32,
         step: &CocStep,
     ) -> CocExpansion {
@@ -149,7 +165,7 @@ impl CocKernels {
             log_scales: ws.buffer(ctx, "coc set log-scales", sets * 12),
             quats: ws.buffer(ctx, "coc set quats", sets * 16),
             acts: self.mlp.activations(ctx, ws, n),
-            gates: ws.buffer(ctx, "coc gates", u64::from(n) * 8),
+            gates: ws.buffer(ctx, "coc gates", u64::from(n) * 16),
             num_gaussians: n,
         };
         if n == 0 {
@@ -182,6 +198,7 @@ impl CocKernels {
                 (8, &out.log_scales),
                 (9, &out.quats),
                 (10, &out.gates),
+                (11, apertures),
             ],
             n.div_ceil(64),
         );
@@ -212,12 +229,13 @@ impl CocKernels {
             v_quats: ws.buffer(ctx, "coc v quats", u64::from(n) * 16),
             v_weights: ws.zeroed(rec, "coc v weights", u64::from(params) * 4),
             v_focus: ws.zeroed(rec, "coc v focus", u64::from(num_views) * 4),
+            v_aperture: ws.zeroed(rec, "coc v aperture", u64::from(num_views) * 4),
         };
         if n == 0 {
             return grads;
         }
         let d_heads = ws.buffer(ctx, "coc d heads", u64::from(n) * hl.len as u64 * 4);
-        let terms = ws.buffer(ctx, "coc focus terms", u64::from(n) * 4);
+        let terms = ws.buffer(ctx, "coc focus terms", u64::from(n) * 8);
         let u = self.uniform(rec, n, step);
         self.backward.dispatch_1d(
             rec,
@@ -239,9 +257,51 @@ impl CocKernels {
         );
         self.mlp
             .encode_backward(rec, ws, weights, &exp.acts, &d_heads, &grads.v_weights, n);
-        self.focus_sum
-            .dispatch(rec, &[(0, &u), (1, &terms), (2, &grads.v_focus)], [1, 1, 1]);
+        self.focus_sum.dispatch(
+            rec,
+            &[
+                (0, &u),
+                (1, &terms),
+                (2, &grads.v_focus),
+                (3, &grads.v_aperture),
+            ],
+            [1, 1, 1],
+        );
         grads
+    }
+
+    /// The M + 1 sets as renderable parameters: the expansion's means, scales and rotations,
+    /// and each set's copy of its bases' opacities and SH (the rasterizer reads one of each
+    /// per Gaussian).
+    pub fn encode_sets(
+        &self,
+        rec: &mut Recorder,
+        ws: &mut Workspace,
+        base: &ParamBuffers,
+        exp: &CocExpansion,
+    ) -> ParamBuffers {
+        let ctx = rec.ctx();
+        let n = u64::from(base.num_gaussians);
+        let sets = u64::from(self.config.copies + 1);
+        let stride = 3 * sh_coeffs_per_channel(base.sh_degree) as u64;
+        let opacity = ws.buffer(ctx, "coc set opacities", sets * n * 4);
+        let sh = ws.buffer(ctx, "coc set sh", sets * n * stride * 4);
+        let (o, s) = (n * 4, n * stride * 4);
+        for m in 0..sets {
+            rec.encoder()
+                .copy_buffer_to_buffer(&base.opacity_logits, 0, &opacity, m * o, o);
+            rec.encoder()
+                .copy_buffer_to_buffer(&base.sh, 0, &sh, m * s, s);
+        }
+        ParamBuffers {
+            means: exp.means.clone(),
+            log_scales: exp.log_scales.clone(),
+            quats: exp.quats.clone(),
+            opacity_logits: opacity,
+            sh,
+            sh_degree: base.sh_degree,
+            num_gaussians: (sets * n) as u32,
+        }
     }
 
     /// `dst[j] = Σ_set src[set·len + j]` over the M + 1 sets (opacity and SH gradients, which

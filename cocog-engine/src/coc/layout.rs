@@ -18,6 +18,10 @@ pub enum CocVariant {
     /// The paper: aperture K, scaling β ∈ (0,1) and unit directions per copy, offsets of at
     /// most the CoC radius K·|1/d − 1/d_F|/2; M = 5.
     Paper,
+    /// A thin lens per photo: the paper's β and directions inside a circle of confusion whose
+    /// radius follows from a learned aperture and focus distance of that photo alone
+    /// (A/2·|1 − d/d_F|, DoF-NeRF's model), so the MLP shapes the blur but cannot size it.
+    Lens,
 }
 
 impl CocVariant {
@@ -25,6 +29,7 @@ impl CocVariant {
         match self {
             Self::Code => "code",
             Self::Paper => "paper",
+            Self::Lens => "lens",
         }
     }
 
@@ -32,7 +37,17 @@ impl CocVariant {
     pub fn default_copies(self) -> u32 {
         match self {
             Self::Code => 4,
-            Self::Paper => 5,
+            Self::Paper | Self::Lens => 5,
+        }
+    }
+
+    /// The variant named on the command line.
+    pub fn parse(name: &str) -> Option<Self> {
+        match name {
+            "code" => Some(Self::Code),
+            "paper" => Some(Self::Paper),
+            "lens" => Some(Self::Lens),
+            _ => None,
         }
     }
 }
@@ -77,9 +92,9 @@ pub struct HeadLayout {
     pub copies: usize,
     /// Paper: softplus → aperture K (one value).
     pub aperture: Option<usize>,
-    /// Paper: sigmoid → β per copy.
+    /// Paper and lens: sigmoid → β per copy.
     pub beta: Option<usize>,
-    /// Code: world-space offsets per copy; paper: directions, normalised.
+    /// Code: offsets per copy; paper and lens: directions, normalised.
     pub pos: usize,
     /// 3 per set (M + 1 sets), through the gated log-clamp to [1, 1.1].
     pub scale: usize,
@@ -93,6 +108,7 @@ impl HeadLayout {
         let (aperture, beta, pos) = match variant {
             CocVariant::Code => (None, None, 0),
             CocVariant::Paper => (Some(0), Some(1), 1 + m),
+            CocVariant::Lens => (None, Some(0), m),
         };
         let scale = pos + 3 * m;
         let rot = scale + 3 * (m + 1);

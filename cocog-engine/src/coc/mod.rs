@@ -16,7 +16,9 @@ mod gpu;
 mod layout;
 mod mlp;
 pub mod reference;
+mod refocus;
 
 pub use gpu::{CocExpansion, CocGrads, CocKernels, CocStep};
 pub use layout::{CocConfig, CocVariant, HeadLayout, INPUT_DIM, MlpLayout, init_weights};
 pub use mlp::MlpActivations;
+pub use refocus::{Frame, Lens, Refocus};

@@ -1,15 +1,16 @@
-// ∂loss/∂focus[view]: the Gaussians' terms summed by one workgroup in a fixed order, so a
-// step's gradient is reproducible.
+// ∂loss/∂focus[view] and ∂loss/∂aperture[view] (lens variant): the Gaussians' terms summed by
+// one workgroup in a fixed order, so a step's gradient is reproducible.
 
 @group(0) @binding(0) var<uniform> step: Step;
-@group(0) @binding(1) var<storage, read> focus_terms: array<f32>;
+@group(0) @binding(1) var<storage, read> focus_terms: array<vec2<f32>>;
 @group(0) @binding(2) var<storage, read_write> v_focus: array<f32>;
+@group(0) @binding(3) var<storage, read_write> v_aperture: array<f32>;
 
-var<workgroup> sums: array<f32, 256>;
+var<workgroup> sums: array<vec2<f32>, 256>;
 
 @compute @workgroup_size(256)
 fn focus_sum(@builtin(local_invocation_index) lid: u32) {
-    var s = 0.0;
+    var s = vec2<f32>(0.0);
     for (var n = lid; n < step.n; n += 256u) {
         s += focus_terms[n];
     }
@@ -21,6 +22,7 @@ fn focus_sum(@builtin(local_invocation_index) lid: u32) {
         }
     }
     if lid == 0u {
-        v_focus[step.view] = sums[0];
+        v_focus[step.view] = sums[0].x;
+        v_aperture[step.view] = sums[0].y;
     }
 }

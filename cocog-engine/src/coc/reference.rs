@@ -1,5 +1,9 @@
 //! f64 CPU reference of h_θ and the CoC expansion, the oracle of the GPU kernels and what the
 //! finite-difference tests differentiate.
+//!
+//! Everything here is in the scene's normalised frame (positions and lengths divided by the
+//! scene scale D, from an origin), as the GPU computes it: h_θ then sees the same numbers in
+//! any unit, and the gate |1/d − 1/d_F| is dimensionless. The GPU maps offsets back by × D.
 
 // Index loops mirror the formulas of method.md §3–§4.
 #![allow(clippy::needless_range_loop)]
@@ -148,13 +152,30 @@ fn sigmoid(x: f64) -> f64 {
     1.0 / (1.0 + (-x).exp())
 }
 
-/// The world-space offset of copy m < M, given the heads and the gate.
-fn offset(variant: CocVariant, hl: &HeadLayout, heads: &[f64], c: f64, m: usize) -> [f64; 3] {
+/// The aperture K of the paper's and the lens variant's circle of confusion K·c: the paper's
+/// head, or for the lens variant the photo's aperture a times the Gaussian's depth d (so that
+/// K·c/2 = a/2·|1 − d/d_F|, the thin lens's radius).
+fn aperture_k(variant: CocVariant, hl: &HeadLayout, heads: &[f64], lens_k: f64) -> f64 {
+    match variant {
+        CocVariant::Paper => softplus(heads[hl.aperture.unwrap_or(0)]),
+        _ => lens_k,
+    }
+}
+
+/// The offset of copy m < M, given the heads and the gate; `lens_k` is the lens variant's K.
+fn offset(
+    variant: CocVariant,
+    hl: &HeadLayout,
+    heads: &[f64],
+    c: f64,
+    lens_k: f64,
+    m: usize,
+) -> [f64; 3] {
     let raw = [0, 1, 2].map(|k| heads[hl.pos + 3 * m + k]);
     match variant {
         CocVariant::Code => raw.map(|v| c * v),
-        CocVariant::Paper => {
-            let k = softplus(heads[hl.aperture.unwrap_or(0)]);
+        CocVariant::Paper | CocVariant::Lens => {
+            let k = aperture_k(variant, hl, heads, lens_k);
             let beta = sigmoid(heads[hl.beta.unwrap_or(0) + m]);
             let n = raw.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-12);
             raw.map(|v| 0.5 * k * c * beta * v / n)
@@ -169,10 +190,11 @@ fn offsets(
     hl: &HeadLayout,
     heads: &[f64],
     c: f64,
+    lens_k: f64,
     centred: bool,
 ) -> Vec<[f64; 3]> {
     let mut out: Vec<[f64; 3]> = (0..hl.copies)
-        .map(|m| offset(variant, hl, heads, c, m))
+        .map(|m| offset(variant, hl, heads, c, lens_k, m))
         .collect();
     if centred && !out.is_empty() {
         let mean = [0, 1, 2].map(|k| out.iter().map(|o| o[k]).sum::<f64>() / out.len() as f64);
@@ -185,7 +207,8 @@ fn offsets(
     out
 }
 
-/// The M + 1 sets of one base Gaussian, copies first and the modulated base set last.
+/// The M + 1 sets of one base Gaussian, copies first and the modulated base set last;
+/// `lens_k` is the lens variant's K = a·d (ignored by the others).
 pub fn expand(
     variant: CocVariant,
     centred: bool,
@@ -193,9 +216,10 @@ pub fn expand(
     base: &Base,
     heads: &[f64],
     c: f64,
+    lens_k: f64,
 ) -> Vec<Expanded> {
     let (unit, _) = normalize4(base.quat);
-    let shifts = offsets(variant, hl, heads, c, centred);
+    let shifts = offsets(variant, hl, heads, c, lens_k, centred);
     (0..=hl.copies)
         .map(|m| {
             let shift = shifts.get(m).copied().unwrap_or([0.0; 3]);
@@ -217,6 +241,8 @@ pub struct ExpandGrads {
     /// d loss / d c (the gate); times `gate`'s second value it is this Gaussian's share of
     /// the focus distance's gradient.
     pub v_gate: f64,
+    /// d loss / d K of the lens variant (times d, this Gaussian's share of the aperture's).
+    pub v_lens_k: f64,
 }
 
 /// The adjoint of `expand`: `v` holds the gradient of every set (same order).
@@ -227,8 +253,10 @@ pub fn expand_backward(
     base: &Base,
     heads: &[f64],
     c: f64,
+    lens_k: f64,
     v: &[Expanded],
 ) -> ExpandGrads {
+    let mut v_lens_k = 0.0;
     let (unit, norm) = normalize4(base.quat);
     // Centring subtracts the mean offset: each copy's offset gradient loses the copies' mean.
     let m_copies = hl.copies.max(1) as f64;
@@ -274,14 +302,18 @@ pub fn expand_backward(
                     v_gate += raw[k] * g_off[k];
                 }
             }
-            CocVariant::Paper => {
-                let (ka, kb) = (hl.aperture.unwrap_or(0), hl.beta.unwrap_or(0) + m);
-                let (aperture, beta) = (softplus(heads[ka]), sigmoid(heads[kb]));
+            CocVariant::Paper | CocVariant::Lens => {
+                let kb = hl.beta.unwrap_or(0) + m;
+                let (aperture, beta) = (aperture_k(variant, hl, heads, lens_k), sigmoid(heads[kb]));
                 let n = raw.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-12);
                 let dir = raw.map(|v| v / n);
                 let dot: f64 = (0..3).map(|k| dir[k] * g_off[k]).sum();
                 // shift = ½·K·c·β·dir.
-                v_heads[ka] += 0.5 * c * beta * dot * sigmoid(heads[ka]);
+                let v_k = 0.5 * c * beta * dot;
+                match hl.aperture {
+                    Some(ka) => v_heads[ka] += v_k * sigmoid(heads[ka]),
+                    None => v_lens_k += v_k,
+                }
                 v_heads[kb] += 0.5 * aperture * c * dot * beta * (1.0 - beta);
                 v_gate += 0.5 * aperture * beta * dot;
                 let s = 0.5 * aperture * c * beta;
@@ -300,5 +332,6 @@ pub fn expand_backward(
         },
         v_heads,
         v_gate,
+        v_lens_k,
     }
 }

@@ -90,6 +90,9 @@ impl Stage for EvalScene {
             downscale: downscale(req, "eval-scene")?,
             background: [0.0; 3],
             depth: false,
+            views: Vec::new(),
+            refocus: None,
+            sweep: Vec::new(),
         };
         let opts = eval_options(req)?;
         // Beside the output, so the renders sit on the same disk and vanish with the stage.

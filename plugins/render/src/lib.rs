@@ -7,11 +7,13 @@
 
 mod cameras;
 mod eval_scene;
+mod refocus;
 mod render_stage;
 mod renderer;
 
 pub use cameras::{NamedCamera, parse_split, split_cameras, split_name};
 pub use eval_scene::EvalScene;
+pub use refocus::{FocusChoice, LensScene, RefocusJob, distance_at};
 pub use render_stage::Render;
 pub use renderer::{SceneRenderer, load_gaussians};
 

@@ -11,7 +11,9 @@ use cocog_pipeline::{
 };
 use serde_json::{Value, json};
 
-use crate::{SceneRenderer, load_gaussians, parse_split, split_cameras};
+use crate::refocus::{FocusChoice, LensScene, RefocusJob};
+use crate::{NamedCamera, SceneRenderer, load_gaussians, parse_split, split_cameras};
+use cocog_engine::nn::CompositeMode;
 
 pub struct Render;
 
@@ -24,6 +26,12 @@ pub(crate) struct RenderJob {
     pub downscale: u32,
     pub background: [f32; 3],
     pub depth: bool,
+    /// Only these views (names or stems), in this order; all of the split when empty.
+    pub views: Vec<String>,
+    /// Depth of field through the scene's lens model; sharp when `None`.
+    pub refocus: Option<RefocusJob>,
+    /// A focus pull: these focus distances over the one view, as `frame-NNN.png`.
+    pub sweep: Vec<f64>,
 }
 
 pub(crate) fn split_option() -> OptionSpec {
@@ -102,9 +110,40 @@ pub(crate) fn render_views(
 ) -> Result<Value, StageError> {
     let mut scene = Scene::load(scene_dir)?;
     scene.rebase(scene_dir)?;
-    let cameras = split_cameras(&scene, scene_dir, job.split, job.downscale)?;
+    let cameras = select(
+        split_cameras(&scene, scene_dir, job.split, job.downscale)?,
+        &job.views,
+    )?;
     let gaussians = load_gaussians(&scene, scene_dir)?;
+    let lens_scene = match &job.refocus {
+        Some(_) => Some(LensScene::load(&scene, scene_dir)?),
+        None => None,
+    };
+    // Everything a request can get wrong is checked before the GPU starts.
+    if let (Some(l), Some(r)) = (&lens_scene, &job.refocus) {
+        match &r.focus {
+            FocusChoice::FromView(name) => {
+                l.train_index(name)?;
+            }
+            FocusChoice::At(x, y) => {
+                if let Some(c) = cameras
+                    .iter()
+                    .find(|c| *x >= c.camera.width || *y >= c.camera.height)
+                {
+                    return Err(StageError::Options(format!(
+                        "option 'focus_at': pixel ({x}, {y}) is outside view {} ({}×{})",
+                        c.name, c.camera.width, c.camera.height
+                    )));
+                }
+            }
+            _ => {}
+        }
+    }
     let gpu = GpuContext::new().map_err(StageError::other)?;
+    let mut refocus = match &lens_scene {
+        Some(l) => Some(l.renderer(&gpu, &gaussians)?),
+        None => None,
+    };
     let mut renderer =
         SceneRenderer::new(&gpu, &gaussians, job.background).map_err(StageError::other)?;
     if job.depth {
@@ -112,17 +151,52 @@ pub(crate) fn render_views(
         std::fs::create_dir_all(&dir).map_err(|e| StageError::io(&dir, e))?;
     }
     let start = Instant::now();
-    let total = cameras.len() as u64;
-    for (i, view) in cameras.iter().enumerate() {
+    let mut lenses = Vec::new();
+    // A sweep renders its one view once per focus distance, into numbered frames.
+    let frames: Vec<(String, &NamedCamera, Option<RefocusJob>)> = if job.sweep.is_empty() {
+        cameras
+            .iter()
+            .map(|v| (v.stem(), v, job.refocus.clone()))
+            .collect()
+    } else {
+        let base = job.refocus.clone().ok_or_else(|| {
+            StageError::Options("option 'focus_sweep' is a refocus: it needs a lens".into())
+        })?;
+        job.sweep
+            .iter()
+            .enumerate()
+            .map(|(i, d)| {
+                let rj = RefocusJob {
+                    focus: FocusChoice::Distance(*d),
+                    ..base.clone()
+                };
+                (format!("frame-{i:03}"), &cameras[0], Some(rj))
+            })
+            .collect()
+    };
+    let total = frames.len() as u64;
+    for (i, (stem, view, refocus_job)) in frames.iter().enumerate() {
         ctx.check_cancelled()?;
         ctx.progress("render", i as u64, total);
-        let img = renderer.render(&view.camera).map_err(StageError::other)?;
-        let png = out.join(format!("{}.png", view.stem()));
+        let img = match (&lens_scene, refocus.as_mut(), refocus_job) {
+            (Some(l), Some(r), Some(rj)) => {
+                let (img, lens) = l.render(r, view, job.background, rj)?;
+                lenses.push(json!({
+                    "view": view.name,
+                    "image": format!("{stem}.png"),
+                    "focus_distance": lens.map(|l| l.focus_distance),
+                    "aperture": lens.map(|l| l.aperture),
+                }));
+                img
+            }
+            _ => renderer.render(&view.camera).map_err(StageError::other)?,
+        };
+        let png = out.join(format!("{stem}.png"));
         to_rgb8(&img)
             .save(&png)
             .map_err(|e| StageError::io(&png, std::io::Error::other(e)))?;
         if job.depth {
-            let exr = out.join("depth").join(format!("{}.exr", view.stem()));
+            let exr = out.join("depth").join(format!("{stem}.exr"));
             write_exr(&exr, &depth_map(&img)).map_err(StageError::other)?;
         }
     }
@@ -132,11 +206,171 @@ pub(crate) fn render_views(
         "split": job.split.map_or("all", crate::split_name),
         "downscale": job.downscale,
         "views": cameras.len(),
+        "frames": frames.len(),
         "width": w,
         "height": h,
         "gaussians": gaussians.len(),
         "seconds": start.elapsed().as_secs_f64(),
         "adapter": gpu.adapter_name(),
+        "lenses": (!lenses.is_empty()).then_some(lenses),
+    }))
+}
+
+/// The cameras named in `wanted` (names or stems), in that order; all when it is empty.
+fn select(cameras: Vec<NamedCamera>, wanted: &[String]) -> Result<Vec<NamedCamera>, StageError> {
+    if wanted.is_empty() {
+        return Ok(cameras);
+    }
+    wanted
+        .iter()
+        .map(|w| {
+            cameras
+                .iter()
+                .find(|c| &c.name == w || &c.stem() == w)
+                .cloned()
+                .ok_or_else(|| {
+                    let names: Vec<&str> = cameras.iter().map(|c| c.name.as_str()).collect();
+                    StageError::Options(format!(
+                        "option 'views': no view named {w:?} in this split (views: {})",
+                        names.join(", ")
+                    ))
+                })
+        })
+        .collect()
+}
+
+/// Focus distances NEAR..FAR over FRAMES frames, even in 1/distance (as a focus ring turns).
+pub fn sweep_distances(text: &str) -> Result<Vec<f64>, StageError> {
+    let bad = |why: &str| {
+        StageError::Options(format!(
+            "option 'focus_sweep': expected NEAR:FAR:FRAMES like 0.5:3:24 (distances in scene \
+             units, 2 to 1000 frames), got {text:?}: {why}"
+        ))
+    };
+    let parts: Vec<&str> = text.split(':').collect();
+    let [near, far, frames] = parts[..] else {
+        return Err(bad("three fields"));
+    };
+    let num = |s: &str| {
+        s.trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite() && *v > 0.0)
+    };
+    let (near, far) = (
+        num(near).ok_or_else(|| bad("NEAR must be a positive distance"))?,
+        num(far).ok_or_else(|| bad("FAR must be a positive distance"))?,
+    );
+    let frames: usize = frames
+        .trim()
+        .parse()
+        .ok()
+        .filter(|f| (2..=1000).contains(f))
+        .ok_or_else(|| bad("FRAMES must be a count from 2 to 1000"))?;
+    Ok((0..frames)
+        .map(|i| {
+            let t = i as f64 / (frames - 1) as f64;
+            1.0 / ((1.0 - t) / near + t / far)
+        })
+        .collect())
+}
+
+/// `job` as a focus pull: one view, the sweep's distances, the other lens options kept.
+fn sweep_job(mut job: RenderJob, text: &str) -> Result<RenderJob, StageError> {
+    if job.views.len() != 1 {
+        return Err(StageError::Options(
+            "option 'focus_sweep' pulls focus over one view: name it with option 'views' \
+             (--views NAME)"
+                .into(),
+        ));
+    }
+    job.sweep = sweep_distances(text)?;
+    job.refocus = Some(RefocusJob {
+        focus: FocusChoice::Distance(job.sweep[0]),
+        aperture: job.refocus.as_ref().map_or(1.0, |r| r.aperture),
+        composite: job
+            .refocus
+            .as_ref()
+            .map_or(CompositeMode::Learned, |r| r.composite),
+    });
+    Ok(job)
+}
+
+/// The refocus options, checked; `None` when none is given (a sharp render).
+fn refocus_job(req: &StageRequest) -> Result<Option<RefocusJob>, StageError> {
+    let o = &req.options;
+    let focus = o.get_str("focus_distance");
+    let at = o.get_str("focus_at");
+    let photographed = o.get_bool("as_photographed").unwrap_or(false);
+    let sweep = o.get_str("focus_sweep").is_some();
+    let aperture = o.get_f64("aperture");
+    let given = [focus.is_some(), at.is_some(), photographed, sweep]
+        .iter()
+        .filter(|b| **b)
+        .count();
+    if given > 1 {
+        return Err(StageError::Options(
+            "choose one of focus_distance, focus_at, as_photographed and focus_sweep".into(),
+        ));
+    }
+    if given == 0 {
+        if aperture.is_some() {
+            return Err(StageError::Options(
+                "option 'aperture' needs a focus: focus_distance, focus_at or as_photographed"
+                    .into(),
+            ));
+        }
+        return Ok(None);
+    }
+    let aperture = aperture.unwrap_or(1.0);
+    if !(aperture.is_finite() && aperture >= 0.0) {
+        return Err(StageError::Options(format!(
+            "option 'aperture' must be 0 or more (1 = as photographed, 0 = sharp), got {aperture}"
+        )));
+    }
+    let focus = if photographed {
+        FocusChoice::AsPhotographed
+    } else if sweep {
+        // Each frame replaces it (sweep_job).
+        FocusChoice::Distance(1.0)
+    } else if let Some(f) = focus {
+        match f.strip_prefix("from:") {
+            Some(view) => FocusChoice::FromView(view.to_owned()),
+            None => match f.parse::<f64>() {
+                Ok(d) if d.is_finite() && d > 0.0 => FocusChoice::Distance(d),
+                _ => {
+                    return Err(StageError::Options(format!(
+                        "option 'focus_distance': expected a positive distance in scene units                          or from:VIEW, got {f:?}"
+                    )));
+                }
+            },
+        }
+    } else {
+        let text = at.unwrap_or_default();
+        let bad = || {
+            StageError::Options(format!(
+                "option 'focus_at': expected a pixel X,Y like \"200,150\", got {text:?}"
+            ))
+        };
+        let (x, y) = text.split_once(',').ok_or_else(bad)?;
+        FocusChoice::At(
+            x.trim().parse().map_err(|_| bad())?,
+            y.trim().parse().map_err(|_| bad())?,
+        )
+    };
+    let composite = match o.get_str("composite").unwrap_or("learned") {
+        "learned" => CompositeMode::Learned,
+        "mean" => CompositeMode::Uniform,
+        other => {
+            return Err(StageError::Options(format!(
+                "option 'composite': expected learned or mean, got {other:?}"
+            )));
+        }
+    };
+    Ok(Some(RefocusJob {
+        focus,
+        aperture,
+        composite,
     }))
 }
 
@@ -155,14 +389,43 @@ impl Stage for Render {
                 OptionSpec::bool("depth", false, "also write depth maps as EXR"),
                 OptionSpec::string("background", "0,0,0", "background colour r,g,b in 0..1"),
                 OptionSpec::optional(
+                    "views",
+                    OptionKind::String,
+                    "only these views, comma-separated names or stems (default: the whole split)",
+                ),
+                OptionSpec::optional(
                     "focus_distance",
-                    OptionKind::Float,
-                    "refocus: plane in focus (needs a CoCoGaussian model; not available yet)",
+                    OptionKind::String,
+                    "refocus (cocog scenes): distance in focus from the camera centre, in scene \
+                     units, or from:VIEW for a training photo's learned focus",
+                ),
+                OptionSpec::optional(
+                    "focus_at",
+                    OptionKind::String,
+                    "refocus: focus on the surface under pixel X,Y of each rendered view",
+                ),
+                OptionSpec::optional(
+                    "as_photographed",
+                    OptionKind::Bool,
+                    "refocus: each training view with its own learned focus and aperture (views \
+                     without one render sharp)",
                 ),
                 OptionSpec::optional(
                     "aperture",
                     OptionKind::Float,
-                    "refocus: aperture scale K (needs a CoCoGaussian model; not available yet)",
+                    "refocus: multiplies the learned aperture (1 = as photographed, 0 = sharp, \
+                     2 = twice the blur)",
+                ),
+                OptionSpec::string(
+                    "composite",
+                    "learned",
+                    "refocus: blend the CoC renders with the learned compositor F, or their mean",
+                ),
+                OptionSpec::optional(
+                    "focus_sweep",
+                    OptionKind::String,
+                    "a focus pull over one view (option views): NEAR:FAR:FRAMES, focus distances \
+                     even in 1/distance, written as frame-NNN.png",
                 ),
             ],
         }
@@ -170,18 +433,27 @@ impl Stage for Render {
 
     fn run(&self, req: &StageRequest, ctx: &dyn Context) -> Result<Value, StageError> {
         let o = &req.options;
-        if o.get_f64("focus_distance").is_some() || o.get_f64("aperture").is_some() {
-            return Err(StageError::Options(
-                "refocused rendering (--focus-distance/--aperture) needs a CoCoGaussian model, \
-                 which `train --method cocog` does not produce yet; render sharp without them"
-                    .into(),
-            ));
-        }
+        let views = o
+            .get_str("views")
+            .map(|v| {
+                v.split(',')
+                    .map(|s| s.trim().to_owned())
+                    .filter(|s| !s.is_empty())
+                    .collect()
+            })
+            .unwrap_or_default();
         let job = RenderJob {
             split: parse_split(o.get_str("split").unwrap_or("test"))?,
             downscale: downscale(req, "render")?,
             background: parse_background(o.get_str("background").unwrap_or("0,0,0"))?,
             depth: o.get_bool("depth").unwrap_or(false),
+            views,
+            refocus: refocus_job(req)?,
+            sweep: Vec::new(),
+        };
+        let job = match o.get_str("focus_sweep") {
+            None => job,
+            Some(text) => sweep_job(job, text)?,
         };
         let summary = render_views(&req.input, &job, &req.output, ctx)?;
         let path = req.output.join("render.json");

@@ -21,8 +21,8 @@ fn bad_requests_name_what_is_wrong() {
         json!({"focus_distance": 2.0}),
     )
     .unwrap_err();
-    assert!(matches!(err, StageError::Options(_)), "{err:?}");
-    assert!(err.to_string().contains("CoCoGaussian"), "{err}");
+    assert!(matches!(err, StageError::Input(_)), "{err:?}");
+    assert!(err.to_string().contains("--method cocog"), "{err}");
     let err = run(render.as_ref(), &scene, &out, json!({"split": "dev"})).unwrap_err();
     assert!(err.to_string().contains("test, train or all"), "{err}");
 

@@ -42,12 +42,16 @@ pub struct CocCheckpoint {
     pub focus: Option<FocusState>,
 }
 
-/// The learned focus distances: d_F of view i is `values[i] × scale` (scene units).
+/// The learned lenses: d_F of view i is `values[i] × scale` (scene units), the lens
+/// variant's aperture `apertures[i] × scale`; h_θ sees positions from `origin` over `scale`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FocusState {
     pub values: Vec<f32>,
     pub moments: MomentState,
+    pub apertures: Vec<f32>,
+    pub aperture_moments: MomentState,
     pub scale: f32,
+    pub origin: [f32; 3],
 }
 
 /// A trainer's complete state between two iterations.
@@ -142,6 +146,10 @@ impl TrainState {
                 tensors.push(("coc.focus".into(), f.values.clone()));
                 tensors.push(("adam.coc_focus.m".into(), f.moments.m.clone()));
                 tensors.push(("adam.coc_focus.v".into(), f.moments.v.clone()));
+                tensors.push(("coc.apertures".into(), f.apertures.clone()));
+                tensors.push(("adam.coc_apertures.m".into(), f.aperture_moments.m.clone()));
+                tensors.push(("adam.coc_apertures.v".into(), f.aperture_moments.v.clone()));
+                tensors.push(("coc.origin".into(), f.origin.to_vec()));
                 coc_meta.push(("coc_focus_scale", f.scale.to_string()));
             }
         }
@@ -288,14 +296,27 @@ impl<'a> Reader<'a> {
             None => None,
             Some(_) => {
                 let (values, moments) = self.with_moments("coc.focus", "coc_focus")?;
+                let (apertures, aperture_moments) =
+                    self.with_moments("coc.apertures", "coc_apertures")?;
                 let scale: f32 = self.number("coc_focus_scale")?;
                 if !(scale.is_finite() && scale > 0.0) {
                     return Err(self.fail(format!("metadata `coc_focus_scale` = {scale}")));
                 }
+                if apertures.len() != values.len() {
+                    return Err(self.fail(format!(
+                        "{} focus distances but {} apertures",
+                        values.len(),
+                        apertures.len()
+                    )));
+                }
+                let o = self.floats("coc.origin", 1, 3)?;
                 Some(FocusState {
                     values,
                     moments,
+                    apertures,
+                    aperture_moments,
                     scale,
+                    origin: [o[0], o[1], o[2]],
                 })
             }
         };
@@ -435,7 +456,10 @@ mod tests {
             focus: Some(FocusState {
                 values: vec![0.4, 0.6, 0.8],
                 moments: moments(3, 3.0),
+                apertures: vec![0.01, 0.02, 0.03],
+                aperture_moments: moments(3, 4.0),
                 scale: 2.5,
+                origin: [0.5, -1.0, 2.0],
             }),
         }
     }

@@ -22,16 +22,18 @@ pub struct CocTrainConfig {
     /// Known focus distances (scene units), one per training view, to start from instead of
     /// the mean camera-to-Gaussian distance (EXIF subject distance, a synthetic dataset's).
     pub initial_focus: Option<Vec<f64>>,
-    /// Start h_θ's heads at zero instead of PyTorch's default: the first blurred step then
-    /// renders M + 1 exact copies of the base (what the wiring test compares with plain 3DGS).
-    pub zero_heads: bool,
+    /// Multiplies the initial weights and biases of h_θ's heads (PyTorch's default: 1). Small
+    /// values start the copies near their base instead of scattered by the untrained heads;
+    /// 0 renders M + 1 exact copies of the base at first (what the wiring test compares with
+    /// plain 3DGS), and keeps the copies identical since they then share every gradient.
+    pub head_init_scale: f32,
 }
 
 impl CocTrainConfig {
     pub fn new(variant: CocVariant) -> Self {
         let (blur_start, composite_start) = match variant {
             CocVariant::Code => (1500, 1500),
-            CocVariant::Paper => (2000, 6000),
+            CocVariant::Paper | CocVariant::Lens => (2000, 6000),
         };
         Self {
             net: CocConfig::new(variant),
@@ -41,17 +43,15 @@ impl CocTrainConfig {
             kernel_lr_final: 1e-5,
             compositor_channels: 64,
             initial_focus: None,
-            zero_heads: false,
+            head_init_scale: 1.0,
         }
     }
 
     /// The configuration of a variant named as on the command line (`code` or `paper`).
     pub fn named(variant: &str) -> Result<Self, String> {
-        match variant {
-            "code" => Ok(Self::new(CocVariant::Code)),
-            "paper" => Ok(Self::new(CocVariant::Paper)),
-            other => Err(format!("unknown CoC variant '{other}' (use code or paper)")),
-        }
+        CocVariant::parse(variant)
+            .map(Self::new)
+            .ok_or_else(|| format!("unknown CoC variant '{variant}' (use code, paper or lens)"))
     }
 
     /// The kernel learning rate at 1-based iteration `it` of a run of `iterations`.

@@ -25,6 +25,44 @@ pub struct DensifyConfig {
     /// first opacity reset on (INRIA: 0.1), or from the first densification when resets are
     /// off; 0 turns the rule off.
     pub prune_large: f32,
+    /// Deblurring 3DGS's depth-weighted pruning (method.md §8.2): the opacity threshold is
+    /// divided by a weight rising linearly from 1 at the nearest Gaussian to this at the
+    /// farthest, so fewer far Gaussians are pruned; 1 is INRIA's uniform threshold.
+    pub depth_prune_range: f32,
+}
+
+/// What "depth" means for depth-weighted pruning: the distance along the cameras' mean
+/// viewing direction (forward-facing captures, like Deblurring 3DGS's world z on LLFF data),
+/// or from their centre when they look every way (a capture around an object).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DepthAxis {
+    pub origin: [f64; 3],
+    /// Unit mean forward direction, `None` when the cameras do not share one.
+    pub forward: Option<[f64; 3]>,
+}
+
+impl DepthAxis {
+    /// From camera centres and their forward directions (the third column of their
+    /// rotations).
+    pub fn from_cameras(centres: &[[f64; 3]], forwards: &[[f64; 3]]) -> Self {
+        let n = centres.len().max(1) as f64;
+        let mean = |v: &[[f64; 3]]| [0, 1, 2].map(|k| v.iter().map(|c| c[k]).sum::<f64>() / n);
+        let f = mean(forwards);
+        let len = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+        // Half of the cameras' forward vectors cancel when they face around an object.
+        Self {
+            origin: mean(centres),
+            forward: (len >= 0.5).then(|| f.map(|v| v / len)),
+        }
+    }
+
+    pub fn depth(&self, p: [f32; 3]) -> f64 {
+        let d = [0, 1, 2].map(|k| f64::from(p[k]) - self.origin[k]);
+        match self.forward {
+            Some(f) => d[0] * f[0] + d[1] * f[1] + d[2] * f[2],
+            None => (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt(),
+        }
+    }
 }
 
 impl Default for DensifyConfig {
@@ -38,6 +76,7 @@ impl Default for DensifyConfig {
             interval: 100,
             opacity_reset_interval: 3000,
             prune_large: 0.1,
+            depth_prune_range: 1.0,
         }
     }
 }
@@ -52,6 +91,19 @@ impl DensifyConfig {
     pub fn auto() -> Self {
         Self {
             prune_large: 0.0,
+            ..Self::default()
+        }
+    }
+
+    /// CoCoGaussian's (and Deblurring 3DGS's) policy, from the released code: densify until
+    /// 20000, no opacity reset, no large-Gaussian prune, depth-weighted pruning over a range
+    /// of 3.
+    pub fn deblur() -> Self {
+        Self {
+            until_iter: 20_000,
+            opacity_reset_interval: 0,
+            prune_large: 0.0,
+            depth_prune_range: 3.0,
             ..Self::default()
         }
     }
@@ -111,7 +163,8 @@ const SPLIT_SCALE_DIV: f32 = 0.8 * SPLIT_CHILDREN as f32;
 /// INRIA `densify_and_prune` with world-space rules relative to `scale` (INRIA: the camera
 /// extent). `prune_large` is INRIA's `max_screen_size` branch (`DensifyConfig::prunes_large_at`);
 /// only its world-space test is modelled, because INRIA zeroes `max_radii2D` in
-/// `densification_postfix` just before it, so its screen-size test never fires.
+/// `densification_postfix` just before it, so its screen-size test never fires. With
+/// `depth_prune_range` > 1, depths along `axis` weight the opacity threshold.
 pub fn plan_densify(
     g: &GaussianParams,
     mean_grads: &[f32],
@@ -119,6 +172,7 @@ pub fn plan_densify(
     prune_large: bool,
     config: &DensifyConfig,
     rng: &mut SplitMix64,
+    axis: Option<&DepthAxis>,
 ) -> DensifyPlan {
     let n = g.len();
     let dense = (f64::from(config.percent_dense) * scale) as f32;
@@ -159,13 +213,36 @@ pub fn plan_densify(
     }
     let before = origins.len();
     let large = (f64::from(config.prune_large) * scale) as f32;
+    let mean_of = |o: &Origin| match o {
+        Origin::Split { mean, .. } => *mean,
+        _ => g.means[o.source()],
+    };
+    // Deblurring 3DGS: threshold / (1 + (range − 1)·(z − z_min)/(z_max − z_min)) over the
+    // Gaussians after cloning and splitting.
+    let range = f64::from(config.depth_prune_range);
+    let threshold: Vec<f32> = match axis.filter(|_| range > 1.0) {
+        Some(axis) => {
+            let z: Vec<f64> = origins.iter().map(|o| axis.depth(mean_of(o))).collect();
+            let lo = z.iter().copied().fold(f64::INFINITY, f64::min);
+            let hi = z.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            let span = (hi - lo).max(f64::MIN_POSITIVE);
+            z.iter()
+                .map(|z| {
+                    (f64::from(config.min_opacity) / (1.0 + (range - 1.0) * (z - lo) / span)) as f32
+                })
+                .collect()
+        }
+        None => vec![config.min_opacity; origins.len()],
+    };
+    let mut keep = threshold.iter();
     origins.retain(|o| {
         let opacity = sigmoid(g.opacity_logits[o.source()]);
         let log_scale = match o {
             Origin::Split { log_scale, .. } => log_scale,
             _ => &g.log_scales[o.source()],
         };
-        !(opacity < config.min_opacity || (prune_large && max_scale(log_scale) > large))
+        let t = keep.next().copied().unwrap_or(config.min_opacity);
+        !(opacity < t || (prune_large && max_scale(log_scale) > large))
     });
     DensifyPlan {
         pruned: before - origins.len(),

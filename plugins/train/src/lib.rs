@@ -31,7 +31,9 @@ pub use checkpoint::{
 };
 pub use coc_config::CocTrainConfig;
 pub use config::TrainConfig;
-pub use densify::{DensifyConfig, DensifyPlan, Origin, apply_plan, gather_rows, plan_densify};
+pub use densify::{
+    DensifyConfig, DensifyPlan, DepthAxis, Origin, apply_plan, gather_rows, plan_densify,
+};
 pub use drop_watch::{DROP_DB, DropWatch, PsnrDrop};
 pub use error::TrainError;
 pub use init::{SH_C0, init_from_points, inverse_sigmoid, rgb_to_sh, scene_extent};

@@ -21,6 +21,9 @@ use crate::{CocTrainConfig, TrainConfig, TrainState, Trainer};
 use schedule::Schedule;
 use test_eval::TestViews;
 
+/// The lens model's file in a cocog output.
+const LENS_MODEL: &str = "lens-model.safetensors";
+
 /// CoCoGaussian (`method = "cocog"`) or vanilla 3DGS (`"3dgs"`, the same loop without CoC sets).
 pub struct Train;
 
@@ -55,6 +58,12 @@ fn options() -> Vec<OptionSpec> {
             false,
             "cocog: subtract the copies' mean offset, so the CoC Gaussians sit around their base \
              (neither published source does)",
+        ),
+        OptionSpec::float(
+            "coc_head_init",
+            1.0,
+            "cocog: scale of h_θ's initial head weights (1 = PyTorch's default, as both sources; \
+             smaller starts the CoC Gaussians near their base)",
         ),
         OptionSpec::int(
             "compositor_channels",
@@ -152,15 +161,13 @@ fn coc_config(req: &StageRequest, iterations: u32) -> Result<Option<CocTrainConf
             )));
         }
     }
-    let variant = match req.options.get_str("coc_variant").unwrap_or("code") {
-        "code" => CocVariant::Code,
-        "paper" => CocVariant::Paper,
-        other => {
-            return Err(StageError::Options(format!(
-                "stage 'train' option 'coc_variant': unknown variant '{other}' (use code or paper)"
-            )));
-        }
-    };
+    let name = req.options.get_str("coc_variant").unwrap_or("code");
+    let variant = CocVariant::parse(name).ok_or_else(|| {
+        StageError::Options(format!(
+            "stage 'train' option 'coc_variant': unknown variant '{name}' (use code, paper or \
+             lens)"
+        ))
+    })?;
     let mut c = CocTrainConfig::new(variant);
     let copies = int(req, "coc_gaussians", 0, 16)? as u32;
     if copies > 0 {
@@ -177,6 +184,13 @@ fn coc_config(req: &StageRequest, iterations: u32) -> Result<Option<CocTrainConf
     }
     c.compositor_channels = int(req, "compositor_channels", 1, 256)? as u32;
     c.net.centred = req.options.get_bool("coc_centred").unwrap_or(false);
+    let head_init = req.options.get_f64("coc_head_init").unwrap_or(1.0);
+    if !(0.0..=10.0).contains(&head_init) {
+        return Err(StageError::Options(format!(
+            "stage 'train' option 'coc_head_init' must be in 0..=10, got {head_init}"
+        )));
+    }
+    c.head_init_scale = head_init as f32;
     if c.blur_start > iterations {
         return Err(StageError::Options(format!(
             "stage 'train': blur_start {} is past the last iteration ({iterations}): the run \
@@ -208,6 +222,9 @@ fn plan(req: &StageRequest) -> Result<Plan, StageError> {
         config: TrainConfig {
             densify: Some(schedule.densify.clone()),
             sh_degree_interval: schedule.sh_interval,
+            lambda_dssim: schedule.lambda_dssim,
+            position_lr_init: schedule.position_lr[0],
+            position_lr_final: schedule.position_lr[1],
             iterations,
             max_sh_degree: int(req, "sh_degree", 0, 3)? as u32,
             seed: int(req, "seed", 0, i64::MAX)? as u64,
@@ -367,11 +384,18 @@ impl Stage for Train {
         let train_views: Vec<usize> = (0..scene.views.len())
             .filter(|&i| scene.views[i].split == Split::Train)
             .collect();
-        for (&i, &d) in train_views.iter().zip(&focus) {
+        let apertures = session.trainer.apertures().map_err(StageError::other)?;
+        for (k, (&i, &d)) in train_views.iter().zip(&focus).enumerate() {
             scene.views[i].lens = Some(cocog_pipeline::Lens {
                 focus_distance: d,
-                aperture: None,
+                aperture: apertures.get(k).copied(),
             });
+        }
+        if let Some(model) = session.trainer.lens_model().map_err(StageError::other)? {
+            model
+                .save(&req.output.join(LENS_MODEL))
+                .map_err(StageError::other)?;
+            scene.lens_model = Some(LENS_MODEL.to_owned());
         }
         session.save_final(&req.output.join("checkpoint"))?;
         session.finish_log(&req.output)?;
@@ -392,9 +416,11 @@ impl Stage for Train {
             "test_ssim": outcome.test.as_ref().and_then(|t| t.ssim),
             "method": if plan.config.coc.is_some() { "cocog" } else { "3dgs" },
             "learned_focus_distances": focus,
+            "learned_apertures": apertures,
             "resolved": { "schedule": schedule, "coc": plan.config.coc.as_ref().map(|c| json!({
                 "variant": c.net.variant.name(),
                 "copies": c.net.copies,
+                "centred": c.net.centred,
                 "blur_start": c.blur_start,
                 "composite_start": c.composite_start,
                 "compositor_channels": c.compositor_channels,

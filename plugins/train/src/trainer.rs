@@ -204,6 +204,8 @@ pub struct Trainer<'c> {
     rng: SplitMix64,
     /// The length the world-space rules and the position learning rate are relative to.
     scene_scale: f64,
+    /// What depth-weighted pruning calls depth.
+    depth_axis: crate::DepthAxis,
     iteration: u32,
     profiling: bool,
 }
@@ -287,6 +289,7 @@ impl<'c> Trainer<'c> {
             readback: Readback::new(IN_FLIGHT),
             redo: VecDeque::new(),
             order: state.order,
+            depth_axis: depth_axis(&cameras),
             cameras,
             scene_scale,
             iteration: state.iteration,
@@ -354,6 +357,25 @@ impl<'c> Trainer<'c> {
         match &self.coc {
             Some(c) => c.focus_distances(self.ctx, self.cameras.len()),
             None => Ok(Vec::new()),
+        }
+    }
+
+    /// The lens variant's learned aperture diameter of every training view (scene units);
+    /// empty for the other methods and variants and before the blurred phase.
+    pub fn apertures(&self) -> Result<Vec<f64>, TrainError> {
+        match &self.coc {
+            Some(c) if c.config.net.variant == cocog_engine::coc::CocVariant::Lens => {
+                c.apertures(self.ctx, self.cameras.len())
+            }
+            _ => Ok(Vec::new()),
+        }
+    }
+
+    /// CoCoGaussian's lens model for refocused renders (`None` for plain 3DGS).
+    pub fn lens_model(&self) -> Result<Option<cocog_formats::lens_model::LensModel>, TrainError> {
+        match &self.coc {
+            Some(c) => Ok(Some(c.lens_model(self.ctx, self.cameras.len())?)),
+            None => Ok(None),
         }
     }
 
@@ -672,6 +694,19 @@ pub(super) struct Resumed {
     iteration: u32,
     /// CoCoGaussian's lens model, when resuming a run that has one.
     coc: Option<crate::CocCheckpoint>,
+}
+
+/// The training cameras' mean centre and viewing direction.
+fn depth_axis(cameras: &[Camera]) -> crate::DepthAxis {
+    let centres: Vec<[f64; 3]> = cameras.iter().map(Camera::centre).collect();
+    let forwards: Vec<[f64; 3]> = cameras
+        .iter()
+        .map(|c| {
+            let m = &c.world_from_camera;
+            [m[0][2], m[1][2], m[2][2]]
+        })
+        .collect();
+    crate::DepthAxis::from_cameras(&centres, &forwards)
 }
 
 /// Views share one resolution and match their images; the Gaussians fit the SH limit.

@@ -2,7 +2,8 @@
 
 use cocog_engine::GaussianParams;
 use cocog_train::{
-    DensifyConfig, Origin, SplitMix64, apply_plan, gather_rows, inverse_sigmoid, plan_densify,
+    DensifyConfig, DepthAxis, Origin, SplitMix64, apply_plan, gather_rows, inverse_sigmoid,
+    plan_densify,
 };
 
 /// Five Gaussians, extent 1 (so clone/split boundary 0.01, "large" 0.1):
@@ -39,7 +40,15 @@ fn case() -> (GaussianParams, Vec<f32>) {
 fn clone_split_and_prune_follow_the_inria_rule() {
     let (g, grads) = case();
     let config = DensifyConfig::default();
-    let plan = plan_densify(&g, &grads, 1.0, false, &config, &mut SplitMix64::new(3));
+    let plan = plan_densify(
+        &g,
+        &grads,
+        1.0,
+        false,
+        &config,
+        &mut SplitMix64::new(3),
+        None,
+    );
     // Originals minus the split one, then clones (0 and 3), then two children of 1; the faint
     // original 3 and its clone are pruned.
     let sources: Vec<String> = plan.origins.iter().map(|o| format!("{o:?}")).collect();
@@ -102,13 +111,69 @@ fn clone_split_and_prune_follow_the_inria_rule() {
 fn after_the_first_reset_large_gaussians_are_pruned_and_seeds_repeat() {
     let (g, grads) = case();
     let config = DensifyConfig::default();
-    let plan = plan_densify(&g, &grads, 1.0, true, &config, &mut SplitMix64::new(3));
+    let plan = plan_densify(
+        &g,
+        &grads,
+        1.0,
+        true,
+        &config,
+        &mut SplitMix64::new(3),
+        None,
+    );
     assert!(!plan.origins.contains(&Origin::Keep(4)));
     assert_eq!(plan.pruned, 3);
-    let again = plan_densify(&g, &grads, 1.0, true, &config, &mut SplitMix64::new(3));
+    let again = plan_densify(
+        &g,
+        &grads,
+        1.0,
+        true,
+        &config,
+        &mut SplitMix64::new(3),
+        None,
+    );
     assert_eq!(plan, again);
     // Schedule: densify in (500, 15000) every 100, reset every 3000 below 15000.
     assert!(!config.densifies_at(500) && config.densifies_at(600) && !config.densifies_at(650));
     assert!(!config.densifies_at(15_000));
     assert!(config.resets_opacity_at(3000) && !config.resets_opacity_at(15_000));
+}
+
+/// Deblurring 3DGS's depth-weighted pruning: the threshold falls from t at the nearest
+/// Gaussian to t / range at the farthest, so an equally faint far Gaussian survives.
+#[test]
+fn far_gaussians_survive_a_depth_weighted_prune() {
+    let faint = inverse_sigmoid(0.003);
+    // Cameras at the origin looking down +z; Gaussians at depths 1, 2 and 3.
+    let g = GaussianParams {
+        sh_degree: 0,
+        means: vec![[0.0, 0.0, 1.0], [0.0, 0.0, 2.0], [0.0, 0.0, 3.0]],
+        log_scales: vec![[0.001f32.ln(); 3]; 3],
+        quats: vec![[1.0, 0.0, 0.0, 0.0]; 3],
+        opacity_logits: vec![faint; 3],
+        sh: vec![0.0; 9],
+    };
+    let grads = [0.0; 3];
+    let axis = DepthAxis::from_cameras(&[[0.0; 3], [0.1, 0.0, 0.0]], &[[0.0, 0.0, 1.0]; 2]);
+    let uniform = DensifyConfig::default();
+    let weighted = DensifyConfig {
+        depth_prune_range: 3.0,
+        ..DensifyConfig::default()
+    };
+    let plan = |c: &DensifyConfig, axis| {
+        plan_densify(&g, &grads, 1.0, false, c, &mut SplitMix64::new(1), axis)
+    };
+    // 0.003 < 0.005: all pruned uniformly.
+    assert_eq!(plan(&uniform, Some(&axis)).origins.len(), 0);
+    // Weighted: thresholds 0.005, 0.0025, 0.00167 at depths 1, 2, 3 → the two far ones stay.
+    let kept = plan(&weighted, Some(&axis)).origins;
+    assert_eq!(kept, vec![Origin::Keep(1), Origin::Keep(2)]);
+    // Without an axis the rule cannot weigh depth and prunes uniformly.
+    assert_eq!(plan(&weighted, None).origins.len(), 0);
+    // Cameras facing every way: depth is the distance from their centre.
+    let around = DepthAxis::from_cameras(
+        &[[0.0, 0.0, -5.0], [0.0, 0.0, 5.0]],
+        &[[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]],
+    );
+    assert!(around.forward.is_none());
+    assert!((around.depth([3.0, 4.0, 0.0]) - 5.0).abs() < 1e-12);
 }

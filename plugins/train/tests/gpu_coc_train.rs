@@ -206,7 +206,7 @@ fn a_cocog_step_with_zero_heads_is_a_3dgs_step() {
     let mut coc = CocTrainConfig::new(CocVariant::Paper);
     coc.blur_start = 1;
     coc.composite_start = 100;
-    coc.zero_heads = true;
+    coc.head_init_scale = 0.0;
     // Frozen h_θ: its heads stay zero, so every step's sets are exact copies of the base.
     coc.kernel_lr_init = 1e-30;
     coc.kernel_lr_final = 1e-30;

@@ -24,15 +24,22 @@ pub struct Schedule {
     pub densify: DensifyConfig,
     pub sh_interval: u32,
     pub scale: ScaleRule,
+    /// λ of (1 − λ)·L1 + λ·D-SSIM.
+    pub lambda_dssim: f32,
+    /// Position learning rate at the start and the end, × the scene scale.
+    pub position_lr: [f64; 2],
 }
 
 impl Schedule {
     fn preset(name: &str) -> Result<Self, StageError> {
+        let t = TrainConfig::default();
         let inria = Self {
             preset: "inria",
             densify: DensifyConfig::default(),
-            sh_interval: TrainConfig::default().sh_degree_interval,
+            sh_interval: t.sh_degree_interval,
             scale: ScaleRule::CameraExtent,
+            lambda_dssim: t.lambda_dssim,
+            position_lr: [t.position_lr_init, t.position_lr_final],
         };
         match name {
             "inria" => Ok(inria),
@@ -41,16 +48,31 @@ impl Schedule {
                 densify: DensifyConfig::auto(),
                 ..inria
             }),
+            // The released CoCoGaussian code (method.md §7–§8), which inherits Deblurring
+            // 3DGS's density control.
+            "deblur" => Ok(Self {
+                preset: "deblur",
+                densify: DensifyConfig::deblur(),
+                lambda_dssim: 0.25,
+                position_lr: [3.2e-4, 3.2e-6],
+                ..inria
+            }),
             other => Err(StageError::Options(format!(
-                "stage 'train' option 'schedule': unknown preset '{other}' (use auto or inria)"
+                "stage 'train' option 'schedule': unknown preset '{other}' (use auto, deblur or \
+                 inria)"
             ))),
         }
     }
 
-    /// The preset named by option `schedule`, with every override given applied.
+    /// The preset named by option `schedule` (by default `deblur` for CoCoGaussian and
+    /// `auto` for plain 3DGS), with every override given applied.
     pub fn from_request(req: &StageRequest) -> Result<Self, StageError> {
         let o = &req.options;
-        let mut s = Self::preset(o.get_str("schedule").unwrap_or("auto"))?;
+        let default = match o.get_str("method") {
+            Some("cocog") => "deblur",
+            _ => "auto",
+        };
+        let mut s = Self::preset(o.get_str("schedule").unwrap_or(default))?;
         let d = &mut s.densify;
         let count =
             |name: &str, min: i64| -> Result<Option<u32>, StageError> {
@@ -106,6 +128,27 @@ impl Schedule {
         if let Some(v) = fraction("prune_large", 1e6)? {
             d.prune_large = v;
         }
+        if let Some(v) = fraction("depth_prune_range", 100.0)? {
+            if v < 1.0 {
+                return Err(StageError::Options(format!(
+                    "stage 'train' option 'depth_prune_range' must be at least 1 (1 = uniform \
+                     pruning), got {v}"
+                )));
+            }
+            d.depth_prune_range = v;
+        }
+        if let Some(v) = fraction("lambda_dssim", 1.0)? {
+            s.lambda_dssim = v;
+        }
+        if let Some(v) = o.get_f64("position_lr") {
+            if !(v.is_finite() && v > 0.0 && v <= 1.0) {
+                return Err(StageError::Options(format!(
+                    "stage 'train' option 'position_lr' must be in (0, 1], got {v}"
+                )));
+            }
+            // The presets decay it 100× over the run.
+            s.position_lr = [v, v / 100.0];
+        }
         if let Some(v) = o.get_str("scene_scale") {
             s.scale = parse_scale(v)?;
         }
@@ -144,7 +187,10 @@ impl Schedule {
             "prune_opacity": tidy(d.min_opacity),
             "prune_large": tidy(d.prune_large),
             "opacity_reset_every": d.opacity_reset_interval,
+            "depth_prune_range": tidy(d.depth_prune_range),
             "sh_every": self.sh_interval,
+            "lambda_dssim": tidy(self.lambda_dssim),
+            "position_lr": self.position_lr,
         })
     }
 }
@@ -170,11 +216,13 @@ pub fn options() -> Vec<OptionSpec> {
     let float = |name: &str, help: &str| OptionSpec::optional(name, OptionKind::Float, help);
     let string = |name: &str, help: &str| OptionSpec::optional(name, OptionKind::String, help);
     vec![
-        OptionSpec::string(
+        OptionSpec::optional(
             "schedule",
-            "auto",
+            OptionKind::String,
             "density-control preset: auto (INRIA's rules without the large-Gaussian prune, \
-             which deletes the background of forward-facing captures) or inria (the original \
+             which deletes the background of forward-facing captures; 3dgs's default), deblur \
+             (CoCoGaussian's released code: no opacity reset, depth-weighted pruning, densify \
+             until 20000, λ 0.25, position lr 3.2e-4; cocog's default) or inria (the original \
              rules exactly)",
         ),
         string(
@@ -211,6 +259,20 @@ pub fn options() -> Vec<OptionSpec> {
             "clamp all opacities to 0.01 every N iterations while densifying; 0 never (3000)",
         ),
         int("sh_every", "raise the SH degree every N iterations (1000)"),
+        float(
+            "depth_prune_range",
+            "divide the prune threshold by up to this for the farthest Gaussians (Deblurring \
+             3DGS; 1 uniform; auto 1, deblur 3)",
+        ),
+        float(
+            "lambda_dssim",
+            "weight of D-SSIM in the loss (auto 0.2, deblur 0.25)",
+        ),
+        float(
+            "position_lr",
+            "initial position learning rate × scene scale, decayed 100× over the run (auto \
+             1.6e-4, deblur 3.2e-4)",
+        ),
     ]
 }
 

@@ -7,13 +7,20 @@ use cocog_engine::{AdamMoments, Batch, Camera, GpuBuffer, GpuContext, ImageSpec,
 
 use crate::{CocCheckpoint, CocTrainConfig, FocusState, MomentState, TrainError};
 
-/// Per training view, the focus distance d_F = values[view] × scale. The released code learns
-/// d_F / (largest camera-to-Gaussian distance), so one learning rate suits any scene scale.
+/// The per-photo lens parameters and the frame h_θ works in. Lengths are divided by `scale`
+/// (the largest camera-to-Gaussian distance at the blur start, as the released code divides
+/// its focus distances) and positions measured from `origin` (the mean training camera
+/// centre), so one learning rate and one initialisation suit any scene unit.
 #[derive(Debug)]
 pub(super) struct Focus {
+    /// Per training view d_F / scale.
     pub values: GpuBuffer,
     pub moments: AdamMoments,
+    /// Per training view the lens variant's aperture a / scale (unused by the others).
+    pub apertures: GpuBuffer,
+    pub aperture_moments: AdamMoments,
     pub scale: f32,
+    pub origin: [f32; 3],
 }
 
 #[derive(Debug)]
@@ -36,10 +43,10 @@ impl CocState {
         let kernels = CocKernels::new(ctx, config.net);
         let mlp = config.net.mlp();
         let mut weights = init_weights(&mlp, seed ^ 0x6C0C_0000_0000_0001);
-        if config.zero_heads {
-            let (_, fan_out, w, b) = mlp.layers[3];
-            weights[w..b + fan_out].iter_mut().for_each(|v| *v = 0.0);
-        }
+        let (_, fan_out, w, b) = mlp.layers[3];
+        weights[w..b + fan_out]
+            .iter_mut()
+            .for_each(|v| *v *= config.head_init_scale);
         let compositor = Compositor::new(
             ctx,
             CompositorConfig::with_channels(config.compositor_channels),
@@ -104,7 +111,10 @@ impl CocState {
         state.focus = k.focus.as_ref().map(|f| Focus {
             values: ctx.storage_from("focus", &f.values),
             moments: upload(ctx, &f.moments),
+            apertures: ctx.storage_from("apertures", &f.apertures),
+            aperture_moments: upload(ctx, &f.aperture_moments),
             scale: f.scale,
+            origin: f.origin,
         });
         Ok(state)
     }
@@ -116,7 +126,10 @@ impl CocState {
             Some(f) => Some(FocusState {
                 values: ctx.read(&f.values, views)?,
                 moments: download(ctx, &f.moments)?,
+                apertures: ctx.read(&f.apertures, views)?,
+                aperture_moments: download(ctx, &f.aperture_moments)?,
                 scale: f.scale,
+                origin: f.origin,
             }),
             None => None,
         };
@@ -134,13 +147,45 @@ impl CocState {
         })
     }
 
+    /// What a refocused render needs: the weights, the frame and the learned lenses.
+    pub fn lens_model(
+        &self,
+        ctx: &GpuContext,
+        views: usize,
+    ) -> Result<cocog_formats::lens_model::LensModel, TrainError> {
+        let net = &self.config.net;
+        let (frame, apertures) = match &self.focus {
+            Some(f) => ((f.origin, f.scale), ctx.read(&f.apertures, views)?),
+            None => (([0.0; 3], 1.0), Vec::new()),
+        };
+        Ok(cocog_formats::lens_model::LensModel {
+            origin: frame.0,
+            scale: frame.1,
+            apertures,
+            variant: net.variant.name().to_owned(),
+            copies: net.copies,
+            width: net.width,
+            centred: net.centred,
+            compositor_channels: self.config.compositor_channels,
+            mlp: ctx.read(&self.weights, net.mlp().len)?,
+            compositor: ctx.read(&self.f_params, self.compositor.layout().len)?,
+            focus_distances: self
+                .focus_distances(ctx, views)?
+                .iter()
+                .map(|d| *d as f32)
+                .collect(),
+        })
+    }
+
     pub fn sets(&self) -> u32 {
         self.config.net.copies + 1
     }
 
     /// Initialises the focus distances as the released code does at its blur start: per view,
     /// the mean distance from its camera centre to the Gaussians, over the largest such
-    /// distance of any view.
+    /// distance of any view. The lens variant's apertures start where a point at half the
+    /// focus distance blurs over 2 pixels: wide enough that the copies' spread has a
+    /// gradient, narrow enough not to scatter the scene.
     pub fn init_focus(&mut self, ctx: &GpuContext, means: &[[f32; 3]], cameras: &[Camera]) {
         let centres: Vec<[f64; 3]> = cameras.iter().map(camera_centre).collect();
         let mut max_depth: f64 = 0.0;
@@ -165,10 +210,21 @@ impl CocState {
             _ => &means_of,
         };
         let values: Vec<f32> = start.iter().map(|d| (d / scale) as f32).collect();
+        // CoC in pixels = f·A·|1/d − 1/d_F|; at d = d_F/2 that is f·A/d_F = 2 → A = 2·d_F/f.
+        let apertures: Vec<f32> = values
+            .iter()
+            .zip(cameras)
+            .map(|(p, c)| (2.0 * f64::from(*p) / c.fx.max(1.0)) as f32)
+            .collect();
+        let n = centres.len().max(1) as f64;
+        let origin = [0, 1, 2].map(|k| (centres.iter().map(|c| c[k]).sum::<f64>() / n) as f32);
         self.focus = Some(Focus {
             moments: AdamMoments::new(ctx, values.len() as u32),
             values: ctx.storage_from("focus", &values),
+            aperture_moments: AdamMoments::new(ctx, apertures.len() as u32),
+            apertures: ctx.storage_from("apertures", &apertures),
             scale: scale as f32,
+            origin,
         });
     }
 
@@ -179,6 +235,8 @@ impl CocState {
             view: view as u32,
             camera_centre: camera_centre(camera).map(|v| v as f32),
             focus_scale: focus.scale,
+            origin: focus.origin,
+            aperture: 1.0,
         })
     }
 
@@ -210,6 +268,18 @@ impl CocState {
             None => *slot = Some(Batch::new(ctx, params, specs)?),
         }
         slot.as_ref().ok_or(TrainError::Poisoned)
+    }
+
+    /// The lens variant's learned apertures per training view, in scene units (empty before
+    /// the blurred phase).
+    pub fn apertures(&self, ctx: &GpuContext, views: usize) -> Result<Vec<f64>, TrainError> {
+        let Some(f) = &self.focus else {
+            return Ok(Vec::new());
+        };
+        let v: Vec<f32> = ctx.read(&f.apertures, views)?;
+        Ok(v.iter()
+            .map(|x| f64::from(*x) * f64::from(f.scale))
+            .collect())
     }
 
     /// Learned focus distances per training view, in scene units.

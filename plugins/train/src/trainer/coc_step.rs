@@ -3,8 +3,9 @@
 //! the loss against the defocused photo flows back through F's product, the rasterizer and the
 //! expansion's adjoint into the base Gaussians, h_θ, F and the view's focus distance.
 
+use cocog_engine::coc::CocVariant;
 use cocog_engine::nn::CompositeMode;
-use cocog_engine::{AdamConfig, Batch, ParamBuffers, Recorder, sh_coeffs_per_channel};
+use cocog_engine::{AdamConfig, Batch, Recorder, sh_coeffs_per_channel};
 
 use super::coc::CocState;
 use super::{Plan, Stopwatch, Trainer};
@@ -49,30 +50,12 @@ impl<'c> Trainer<'c> {
             &base.log_scales,
             &base.quats,
             &focus.values,
+            &focus.apertures,
             n,
             &step,
         );
         watch.times.coc_net += watch.lap_recorded(rec)?;
-        // The sets share their base's opacity and SH; the rasterizer reads one per Gaussian.
-        let stride = 3 * sh_coeffs_per_channel(base.sh_degree) as u64;
-        let opacity = ws.buffer(ctx, "coc set opacities", u64::from(sets * n) * 4);
-        let sh = ws.buffer(ctx, "coc set sh", u64::from(sets * n) * stride * 4);
-        for m in 0..u64::from(sets) {
-            let (o, s) = (u64::from(n) * 4, u64::from(n) * stride * 4);
-            rec.encoder()
-                .copy_buffer_to_buffer(&base.opacity_logits, 0, &opacity, m * o, o);
-            rec.encoder()
-                .copy_buffer_to_buffer(&base.sh, 0, &sh, m * s, s);
-        }
-        let set_params = ParamBuffers {
-            means: exp.means.clone(),
-            log_scales: exp.log_scales.clone(),
-            quats: exp.quats.clone(),
-            opacity_logits: opacity,
-            sh,
-            sh_degree: base.sh_degree,
-            num_gaussians: sets * n,
-        };
+        let set_params = coc.kernels.encode_sets(rec, ws, base, &exp);
         let sbatch = CocState::aim(&mut coc.batch, ctx, set_params, sets, camera, background)?;
         let state = self.renderer.encode_forward(rec, ws, sbatch, self.capacity);
         watch.times.forward += watch.lap_recorded(rec)?;
@@ -121,6 +104,7 @@ impl<'c> Trainer<'c> {
             &step,
         );
         let v_opacity = ws.buffer(ctx, "coc v opacities", u64::from(n) * 4);
+        let stride = 3 * sh_coeffs_per_channel(base.sh_degree) as u64;
         let v_sh = ws.buffer(ctx, "coc v sh", u64::from(n) * stride * 4);
         coc.kernels
             .encode_sum_sets(rec, &g.opacity_logits, &v_opacity, n);
@@ -150,6 +134,11 @@ impl<'c> Trainer<'c> {
         if let Some(f) = &coc.focus {
             self.adam
                 .encode(rec, &f.values, &cg.v_focus, &f.moments, &lr, t_blur, skip);
+            if coc.config.net.variant == CocVariant::Lens {
+                let a = &f.apertures;
+                let (g, m) = (&cg.v_aperture, &f.aperture_moments);
+                self.adam.encode(rec, a, g, m, &lr, t_blur, skip);
+            }
         }
         if composites {
             let t = since(coc.config.composite_start.max(coc.config.blur_start));

@@ -52,6 +52,7 @@ impl Trainer<'_> {
             prune_large,
             config,
             &mut self.rng,
+            Some(&self.depth_axis),
         );
         if plan.origins.is_empty() {
             return Err(TrainError::Invalid(format!(

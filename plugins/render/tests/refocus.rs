@@ -1,0 +1,209 @@
+//! Refocused renders through a scene's lens model: aperture 0 is the sharp render bit for
+//! bit, a focus pull writes its frames, `--as-photographed` gives training views their own
+//! lens, and bad requests fail naming what is wrong before anything is written.
+
+mod common;
+
+use std::path::Path;
+
+use cocog_engine::coc::{CocConfig, CocVariant, init_weights};
+use cocog_engine::nn::CompositorConfig;
+use cocog_formats::lens_model::LensModel;
+use cocog_pipeline::{Scene, StageError};
+use common::{gpu_available, reference_png, run, stage, write_scene};
+use serde_json::{Value, json};
+
+/// An untrained lens model of `variant` for the common scene (one training view, b.png).
+fn lens_model(variant: CocVariant) -> LensModel {
+    let config = CocConfig {
+        centred: true,
+        ..CocConfig::new(variant)
+    };
+    let channels = 4;
+    LensModel {
+        variant: variant.name().into(),
+        copies: config.copies,
+        width: config.width,
+        centred: true,
+        compositor_channels: channels,
+        mlp: init_weights(&config.mlp(), 5),
+        compositor: CompositorConfig::with_channels(channels).layout().init(6),
+        origin: [0.0, 0.0, 0.0],
+        scale: 5.0,
+        // b.png was "photographed" focused 3 units away.
+        focus_distances: vec![3.0],
+        apertures: vec![0.02],
+    }
+}
+
+fn cocog_scene(dir: &Path, variant: CocVariant) {
+    let (png, _) = reference_png();
+    write_scene(dir, &png);
+    lens_model(variant)
+        .save(&dir.join("lens-model.safetensors"))
+        .unwrap();
+    let mut s = Scene::load(dir).unwrap();
+    s.lens_model = Some("lens-model.safetensors".into());
+    s.save(dir).unwrap();
+}
+
+fn render(scene: &Path, out: &Path, options: Value) -> Result<Value, StageError> {
+    std::fs::create_dir_all(out).unwrap();
+    run(stage("render").as_ref(), scene, out, options)
+}
+
+fn png(path: &Path) -> Vec<u8> {
+    image::open(path).unwrap().to_rgb8().into_raw()
+}
+
+#[test]
+fn aperture_zero_is_the_sharp_render_and_a_lens_blurs() {
+    if !gpu_available() {
+        return;
+    }
+    for variant in [CocVariant::Code, CocVariant::Lens] {
+        let tmp = tempfile::tempdir().unwrap();
+        let scene = tmp.path().join("scene");
+        cocog_scene(&scene, variant);
+        let sharp = tmp.path().join("sharp");
+        render(&scene, &sharp, json!({"split": "all"})).unwrap();
+        let zero = tmp.path().join("zero");
+        let s = render(
+            &scene,
+            &zero,
+            json!({"split": "all", "focus_distance": "2.5", "aperture": 0.0}),
+        )
+        .unwrap();
+        assert_eq!(s["lenses"][0]["aperture"], 0.0, "{s}");
+        for v in ["a", "b"] {
+            let (x, y) = (
+                png(&sharp.join(format!("{v}.png"))),
+                png(&zero.join(format!("{v}.png"))),
+            );
+            assert!(
+                x == y,
+                "{variant:?} {v}: aperture 0 must equal the sharp render"
+            );
+        }
+        let wide = tmp.path().join("wide");
+        render(
+            &scene,
+            &wide,
+            json!({"views": "a", "focus_distance": "2.5", "aperture": 3.0}),
+        )
+        .unwrap();
+        let (x, y) = (png(&sharp.join("a.png")), png(&wide.join("a.png")));
+        let differ = x.iter().zip(&y).filter(|(p, q)| p != q).count();
+        assert!(
+            differ > x.len() / 10,
+            "{variant:?}: a wide aperture must change the render ({differ} of {} bytes)",
+            x.len()
+        );
+    }
+}
+
+#[test]
+fn photographed_lenses_pulls_and_focus_points() {
+    if !gpu_available() {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = tmp.path().join("scene");
+    cocog_scene(&scene, CocVariant::Lens);
+    // Training views get their own lens; the test view, which has none, renders sharp.
+    let out = tmp.path().join("photographed");
+    let s = render(
+        &scene,
+        &out,
+        json!({"split": "all", "as_photographed": true}),
+    )
+    .unwrap();
+    let lenses = s["lenses"].as_array().unwrap();
+    let lens_of = |v: &str| lenses.iter().find(|l| l["view"] == v).unwrap().clone();
+    assert_eq!(lens_of("b.png")["focus_distance"], 3.0);
+    assert_eq!(lens_of("a.png")["focus_distance"], Value::Null);
+    // from:VIEW takes that photo's focus.
+    let out = tmp.path().join("from");
+    let s = render(
+        &scene,
+        &out,
+        json!({"views": "a", "focus_distance": "from:b"}),
+    )
+    .unwrap();
+    assert_eq!(s["lenses"][0]["focus_distance"], 3.0);
+    // A focus at a pixel: the surface it sees, a positive distance.
+    let out = tmp.path().join("at");
+    let s = render(&scene, &out, json!({"views": "a", "focus_at": "20,15"})).unwrap();
+    let d = s["lenses"][0]["focus_distance"].as_f64().unwrap();
+    assert!(d > 1.5 && d < 6.0, "focus at the centre pixel: {d}");
+    // A pull: frames even in 1/distance, near to far.
+    let out = tmp.path().join("pull");
+    let s = render(&scene, &out, json!({"views": "a", "focus_sweep": "1:4:5"})).unwrap();
+    assert_eq!(s["frames"], 5);
+    let d: Vec<f64> = s["lenses"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|l| l["focus_distance"].as_f64().unwrap())
+        .collect();
+    assert!(
+        (d[0] - 1.0).abs() < 1e-6 && (d[4] - 4.0).abs() < 1e-5,
+        "{d:?}"
+    );
+    assert!(
+        (1.0 / d[2] - 0.625).abs() < 1e-6,
+        "the middle frame is even in 1/d: {d:?}"
+    );
+    for i in 0..5 {
+        assert!(out.join(format!("frame-{i:03}.png")).is_file());
+    }
+}
+
+#[test]
+fn bad_refocus_requests_name_what_is_wrong_and_write_nothing() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = tmp.path().join("scene");
+    cocog_scene(&scene, CocVariant::Code);
+    let cases = [
+        (json!({"focus_distance": "-1"}), "positive distance"),
+        (json!({"focus_distance": "NaN"}), "positive distance"),
+        (
+            json!({"focus_distance": "2", "aperture": -0.5}),
+            "0 or more",
+        ),
+        (json!({"aperture": 2.0}), "needs a focus"),
+        (
+            json!({"focus_distance": "from:zzz"}),
+            "no training view named \"zzz\"",
+        ),
+        (
+            json!({"focus_distance": "2", "views": "q"}),
+            "no view named \"q\"",
+        ),
+        (json!({"focus_at": "3"}), "X,Y"),
+        (
+            json!({"focus_distance": "2", "as_photographed": true}),
+            "choose one",
+        ),
+        (json!({"focus_sweep": "1:2:3"}), "one view"),
+        (
+            json!({"views": "a", "focus_sweep": "1:2"}),
+            "NEAR:FAR:FRAMES",
+        ),
+        (
+            json!({"focus_distance": "2", "composite": "max"}),
+            "learned or mean",
+        ),
+    ];
+    for (options, needle) in cases {
+        let out = tmp.path().join("out");
+        let err = render(&scene, &out, options.clone()).unwrap_err();
+        assert!(
+            err.to_string().contains(needle),
+            "{options}: {needle:?} not in {err}"
+        );
+        let written = std::fs::read_dir(&out).unwrap().count();
+        assert_eq!(written, 0, "{options}: nothing may be written");
+        std::fs::remove_dir(&out).unwrap();
+    }
+}
