@@ -289,6 +289,10 @@ pub struct TrainArgs {
     /// a circle of confusion sits around its in-focus point.
     #[arg(long = "coc-centred")]
     pub coc_centred: bool,
+    /// cocog: leave the base set's scale and rotation unmodulated while training, so training
+    /// renders the base as the test views do (the released code modulates it).
+    #[arg(long = "coc-sharp-base")]
+    pub coc_sharp_base: bool,
     /// cocog: scale of h_θ's initial head weights (1 = PyTorch's default; smaller starts the
     /// CoC Gaussians near their base instead of scattered).
     #[arg(long = "coc-head-init", value_parser = finite)]
@@ -508,8 +512,8 @@ pub struct EvalArgs {
     /// The folder of ground-truth images, matched to --pred by file name.
     #[arg(long)]
     pub gt: Option<PathBuf>,
-    /// Where to write metrics.json. Default: metrics.json inside SCENE, or inside the --pred
-    /// folder.
+    /// Where to write metrics.json. Default: metrics.json inside SCENE; with --pred, no file:
+    /// the scores go to stdout (a table, or JSON with --json).
     #[arg(short, long)]
     pub output: Option<PathBuf>,
     /// LPIPS: auto (when weights are installed), require, or off. Install the weights once

@@ -115,6 +115,7 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
                 "composite_start" => a.composite_start,
                 "compositor_channels" => a.compositor_channels,
                 "coc_centred" => a.coc_centred.then_some(true),
+                "coc_modulate_base" => a.coc_sharp_base.then_some(false),
                 "coc_head_init" => a.coc_head_init,
                 "sh_degree" => a.sh_degree,
                 "random_background" => a.random_background.then_some(true),
@@ -311,19 +312,31 @@ fn eval(
 ) -> Result<()> {
     match (&a.scene, &a.pred, &a.gt) {
         (None, Some(pred), Some(gt)) => {
-            let output = a
-                .output
-                .clone()
-                .unwrap_or_else(|| pred.join("metrics.json"));
+            // The prediction folder is the user's: without -o the scores go to stdout only.
+            let scratch = match &a.output {
+                Some(_) => None,
+                None => Some(tempfile::tempdir().context("a scratch folder for the scores")?),
+            };
+            let output = match (&a.output, &scratch) {
+                (Some(o), _) => o.clone(),
+                (None, Some(t)) => t.path().join("metrics.json"),
+                (None, None) => unreachable!("a scratch folder exists without -o"),
+            };
             let o = options! {
                 "gt" => Some(gt.display().to_string()), "lpips" => a.lpips.clone(),
                 "vgg" => a.vgg.then_some(true), "threads" => a.threads,
                 "lpips_weights" => a.lpips_weights.as_ref().map(|p| p.display().to_string()),
             };
-            // Re-scoring a folder replaces its own default metrics file.
-            let force = g.force || a.output.is_none();
             let entry = resolve(registry, "eval")?;
-            let summary = run_stage(entry, pred, &output, &o, force, ctx)?;
+            let summary = run_stage(entry, pred, &output, &o, g.force, ctx)?;
+            if scratch.is_some() {
+                if g.json {
+                    println!("{}", serde_json::to_string_pretty(&summary)?);
+                } else {
+                    print!("{}", cocog_eval::format_table(&summary));
+                }
+                return Ok(());
+            }
             if !g.quiet {
                 eprint!("{}", cocog_eval::format_table(&summary));
             }

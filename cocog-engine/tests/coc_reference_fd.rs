@@ -42,8 +42,7 @@ impl Probe {
 }
 
 struct Case {
-    variant: CocVariant,
-    centred: bool,
+    config: CocConfig,
     hl: HeadLayout,
     ml: MlpLayout,
     weights: Vec<f64>,
@@ -59,6 +58,9 @@ impl Case {
     fn new(variant: CocVariant, centred: bool, seed: u64) -> Self {
         let mut config = CocConfig::new(variant);
         config.width = 8;
+        config.centred = centred;
+        // The released code modulates the base set; the centred cases check the other way.
+        config.modulate_base = !centred;
         let (hl, ml) = (config.heads(), config.mlp());
         let mut weights: Vec<f64> = init_weights(&ml, seed)
             .iter()
@@ -89,8 +91,7 @@ impl Case {
             ],
         };
         Self {
-            variant,
-            centred,
+            config,
             hl,
             ml,
             weights,
@@ -117,15 +118,7 @@ impl Case {
     fn loss_with(&self, base: &Base, heads: &[f64], focus: f64, aperture: f64) -> f64 {
         let (c, _) = gate(self.base.mean, self.camera, focus);
         let k = aperture * self.depth();
-        self.probe.loss(&expand(
-            self.variant,
-            self.centred,
-            &self.hl,
-            base,
-            heads,
-            c,
-            k,
-        ))
+        self.probe.loss(&expand(&self.config, base, heads, c, k))
     }
 
     fn loss(&self, base: &Base, heads: &[f64], focus: f64) -> f64 {
@@ -137,9 +130,7 @@ impl Case {
         let trace = mlp_forward(&self.ml, &self.weights, input(&self.base, self.camera));
         let (c, dc_dfocus) = gate(self.base.mean, self.camera, self.focus);
         let g = expand_backward(
-            self.variant,
-            self.centred,
-            &self.hl,
+            &self.config,
             &self.base,
             &trace.heads,
             c,
@@ -299,9 +290,7 @@ fn centred_copies_average_to_the_base() {
         let (c, _) = gate(case.base.mean, case.camera, case.focus);
         assert!(c > 0.1, "the gate must be open: {c}");
         let sets = expand(
-            variant,
-            true,
-            &case.hl,
+            &case.config,
             &case.base,
             &case.heads(&case.weights),
             c,
@@ -329,9 +318,7 @@ fn in_focus_gaussians_do_not_spread() {
         let (c, _) = gate(case.base.mean, case.camera, d);
         assert!(c < 1e-12);
         let sets = expand(
-            variant,
-            false,
-            &case.hl,
+            &case.config,
             &case.base,
             &case.heads(&case.weights),
             c,

@@ -22,6 +22,8 @@ pub struct LensModel {
     pub width: u32,
     /// Whether the copies' mean offset is subtracted.
     pub centred: bool,
+    /// Whether the base set's scale and rotation are modulated like the copies'.
+    pub modulate_base: bool,
     /// Hidden channels of F.
     pub compositor_channels: u32,
     pub mlp: Vec<f32>,
@@ -78,6 +80,7 @@ impl LensModel {
             ("copies".to_owned(), self.copies.to_string()),
             ("width".to_owned(), self.width.to_string()),
             ("centred".to_owned(), self.centred.to_string()),
+            ("modulate_base".to_owned(), self.modulate_base.to_string()),
             (
                 "compositor_channels".to_owned(),
                 self.compositor_channels.to_string(),
@@ -141,11 +144,13 @@ impl LensModel {
             }
             Ok(v)
         };
-        let centred = match text("centred")?.as_str() {
-            "true" => true,
-            "false" => false,
-            other => return Err(fail(format!("metadata `centred` = {other:?}"))),
+        let flag = |key: &str| match text(key)?.as_str() {
+            "true" => Ok(true),
+            "false" => Ok(false),
+            other => Err(fail(format!("metadata `{key}` = {other:?}"))),
         };
+        let centred = flag("centred")?;
+        let modulate_base = flag("modulate_base")?;
         let origin = floats("origin")?;
         let scale = floats("scale")?;
         let (origin, scale) = match (&origin[..], &scale[..]) {
@@ -165,6 +170,7 @@ impl LensModel {
             copies: number("copies")?,
             width: number("width")?,
             centred,
+            modulate_base,
             compositor_channels: number("compositor_channels")?,
             mlp: floats("mlp")?,
             compositor: floats("compositor")?,
@@ -189,6 +195,7 @@ mod tests {
             copies: 4,
             width: 64,
             centred: true,
+            modulate_base: true,
             compositor_channels: 16,
             mlp: vec![0.5, -0.25, 1e-3],
             compositor: vec![2.0; 5],

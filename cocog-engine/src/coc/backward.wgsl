@@ -58,22 +58,26 @@ fn backward(
     var v_unit = vec4<f32>(0.0);
     for (var m = 0u; m <= M; m++) {
         let o = m * step.n + g;
+        var cm = c;
+        if m == M && !MODULATE_BASE {
+            cm = 0.0;
+        }
         let gm = vec3<f32>(v_set_means[3u * o], v_set_means[3u * o + 1u], v_set_means[3u * o + 2u]);
         v_mean += gm;
         for (var k = 0u; k < 3u; k++) {
             let gl = v_set_log_scales[3u * o + k];
             v_ls[k] += gl;
             let h = heads[hh + H_SCALE + 3u * m + k];
-            let d = multiplier(c, h);
-            d_heads[dh + H_SCALE + 3u * m + k] += gl * c * d.y / d.x;
+            let d = multiplier(cm, h);
+            d_heads[dh + H_SCALE + 3u * m + k] += gl * cm * d.y / d.x;
             v_gate += gl * h * d.y / d.x;
         }
         for (var k = 0u; k < 4u; k++) {
             let gq = v_set_quats[4u * o + k];
             let h = heads[hh + H_ROT + 4u * m + k];
-            let d = multiplier(c, h);
+            let d = multiplier(cm, h);
             v_unit[k] += gq * d.x;
-            d_heads[dh + H_ROT + 4u * m + k] += gq * unit[k] * c * d.y;
+            d_heads[dh + H_ROT + 4u * m + k] += gq * unit[k] * cm * d.y;
             v_gate += gq * unit[k] * h * d.y;
         }
         if m == M {

@@ -113,12 +113,17 @@ fn expand(
         }
         let o = m * step.n + g;
         let p = mean + step.scale * shift;
+        // The base set's multipliers stay 1 unless it is modulated.
+        var cm = c;
+        if m == M && !MODULATE_BASE {
+            cm = 0.0;
+        }
         set_means[3u * o] = p.x; set_means[3u * o + 1u] = p.y; set_means[3u * o + 2u] = p.z;
         for (var j = 0u; j < 3u; j++) {
-            set_log_scales[3u * o + j] = log_scales[3u * g + j] + log(multiplier(c, heads[h + H_SCALE + 3u * m + j]).x);
+            set_log_scales[3u * o + j] = log_scales[3u * g + j] + log(multiplier(cm, heads[h + H_SCALE + 3u * m + j]).x);
         }
         for (var j = 0u; j < 4u; j++) {
-            set_quats[4u * o + j] = unit[j] * multiplier(c, heads[h + H_ROT + 4u * m + j]).x;
+            set_quats[4u * o + j] = unit[j] * multiplier(cm, heads[h + H_ROT + 4u * m + j]).x;
         }
     }
 }

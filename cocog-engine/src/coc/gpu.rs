@@ -88,7 +88,7 @@ fn prelude(config: &CocConfig) -> String {
     let width = config.width;
     let s = format!(
         "const M: u32 = {m}u;\nconst WIDTH: u32 = {width}u;\nconst HEADS: u32 = {heads}u;\n\
-         const PAPER: bool = {paper};\nconst LENS: bool = {lens};\nconst CENTRED: bool = {centred};\nconst H_APERTURE: u32 = {ha}u;\nconst H_BETA: u32 = {hb}u;\n\
+         const PAPER: bool = {paper};\nconst LENS: bool = {lens};\nconst CENTRED: bool = {centred};\nconst MODULATE_BASE: bool = {modulate_base};\nconst H_APERTURE: u32 = {ha}u;\nconst H_BETA: u32 = {hb}u;\n\
          const H_POS: u32 = {hp}u;\nconst H_SCALE: u32 = {hs}u;\nconst H_ROT: u32 = {hr}u;\n\
          const IN_DIM: u32 = {INPUT_DIM}u;\nconst MEAN_FREQS: u32 = {MEAN_FREQS}u;\n\
          const CAMERA_FREQS: u32 = {CAMERA_FREQS}u;\n",
@@ -97,6 +97,7 @@ fn prelude(config: &CocConfig) -> String {
         paper = config.variant == CocVariant::Paper,
         lens = config.variant == CocVariant::Lens,
         centred = config.centred,
+        modulate_base = config.modulate_base,
         ha = hl.aperture.unwrap_or(0),
         hb = hl.beta.unwrap_or(0),
         hp = hl.pos,

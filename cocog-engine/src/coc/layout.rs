@@ -64,6 +64,9 @@ pub struct CocConfig {
     /// confusion sits around the in-focus point (neither source does; without it the copies
     /// can translate a Gaussian per view).
     pub centred: bool,
+    /// Modulate the base set's scale and rotation too, as the released code does; the test
+    /// views render the base unmodulated, so without it training renders what testing does.
+    pub modulate_base: bool,
 }
 
 impl CocConfig {
@@ -73,6 +76,7 @@ impl CocConfig {
             copies: variant.default_copies(),
             width: 64,
             centred: false,
+            modulate_base: true,
         }
     }
 

@@ -8,7 +8,9 @@
 // Index loops mirror the formulas of method.md §3–§4.
 #![allow(clippy::needless_range_loop)]
 
-use super::layout::{CAMERA_FREQS, CocVariant, HeadLayout, INPUT_DIM, MEAN_FREQS, MlpLayout};
+use super::layout::{
+    CAMERA_FREQS, CocConfig, CocVariant, HeadLayout, INPUT_DIM, MEAN_FREQS, MlpLayout,
+};
 
 /// Upper end of the scale and rotation multipliers (method.md §3.4: δ_max = 1.1).
 pub const DELTA_MAX: f64 = 1.1;
@@ -207,22 +209,32 @@ fn offsets(
     out
 }
 
-/// The M + 1 sets of one base Gaussian, copies first and the modulated base set last;
+/// The gate of set m's scale and rotation multipliers: closed for the base set unless the
+/// configuration modulates it.
+fn modulation_gate(config: &CocConfig, m: usize, c: f64) -> f64 {
+    if m == config.copies as usize && !config.modulate_base {
+        0.0
+    } else {
+        c
+    }
+}
+
+/// The M + 1 sets of one base Gaussian, copies first and the (modulated) base set last;
 /// `lens_k` is the lens variant's K = a·d (ignored by the others).
 pub fn expand(
-    variant: CocVariant,
-    centred: bool,
-    hl: &HeadLayout,
+    config: &CocConfig,
     base: &Base,
     heads: &[f64],
     c: f64,
     lens_k: f64,
 ) -> Vec<Expanded> {
+    let (variant, hl) = (config.variant, &config.heads());
     let (unit, _) = normalize4(base.quat);
-    let shifts = offsets(variant, hl, heads, c, lens_k, centred);
+    let shifts = offsets(variant, hl, heads, c, lens_k, config.centred);
     (0..=hl.copies)
         .map(|m| {
             let shift = shifts.get(m).copied().unwrap_or([0.0; 3]);
+            let c = modulation_gate(config, m, c);
             Expanded {
                 mean: [0, 1, 2].map(|k| base.mean[k] + shift[k]),
                 log_scale: [0, 1, 2]
@@ -247,15 +259,14 @@ pub struct ExpandGrads {
 
 /// The adjoint of `expand`: `v` holds the gradient of every set (same order).
 pub fn expand_backward(
-    variant: CocVariant,
-    centred: bool,
-    hl: &HeadLayout,
+    config: &CocConfig,
     base: &Base,
     heads: &[f64],
     c: f64,
     lens_k: f64,
     v: &[Expanded],
 ) -> ExpandGrads {
+    let (variant, centred, hl) = (config.variant, config.centred, &config.heads());
     let mut v_lens_k = 0.0;
     let (unit, norm) = normalize4(base.quat);
     // Centring subtracts the mean offset: each copy's offset gradient loses the copies' mean.
@@ -274,20 +285,21 @@ pub fn expand_backward(
     let mut v_unit = [0.0; 4];
     for m in 0..=hl.copies {
         let g = &v[m];
+        let cm = modulation_gate(config, m, c);
         for k in 0..3 {
             v_mean[k] += g.mean[k];
             v_log_scale[k] += g.log_scale[k];
             // log_scale' = log_scale + ln δ.
             let h = heads[hl.scale + 3 * m + k];
-            let (d, inv) = multiplier(c, h);
-            v_heads[hl.scale + 3 * m + k] += g.log_scale[k] * c * inv / d;
+            let (d, inv) = multiplier(cm, h);
+            v_heads[hl.scale + 3 * m + k] += g.log_scale[k] * cm * inv / d;
             v_gate += g.log_scale[k] * h * inv / d;
         }
         for k in 0..4 {
             let h = heads[hl.rot + 4 * m + k];
-            let (d, inv) = multiplier(c, h);
+            let (d, inv) = multiplier(cm, h);
             v_unit[k] += g.quat[k] * d;
-            v_heads[hl.rot + 4 * m + k] += g.quat[k] * unit[k] * c * inv;
+            v_heads[hl.rot + 4 * m + k] += g.quat[k] * unit[k] * cm * inv;
             v_gate += g.quat[k] * unit[k] * h * inv;
         }
         if m == hl.copies {

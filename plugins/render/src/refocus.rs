@@ -72,6 +72,7 @@ impl LensScene {
             copies: model.copies,
             width: model.width,
             centred: model.centred,
+            modulate_base: model.modulate_base,
         };
         let train_views: Vec<String> = scene
             .views

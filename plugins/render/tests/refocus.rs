@@ -25,6 +25,7 @@ fn lens_model(variant: CocVariant) -> LensModel {
         copies: config.copies,
         width: config.width,
         centred: true,
+        modulate_base: true,
         compositor_channels: channels,
         mlp: init_weights(&config.mlp(), 5),
         compositor: CompositorConfig::with_channels(channels).layout().init(6),

@@ -33,6 +33,7 @@ pub struct CocCheckpoint {
     pub copies: u32,
     pub width: u32,
     pub centred: bool,
+    pub modulate_base: bool,
     pub compositor_channels: u32,
     pub mlp: Vec<f32>,
     pub mlp_moments: MomentState,
@@ -140,6 +141,7 @@ impl TrainState {
                 ("coc_copies", c.copies.to_string()),
                 ("coc_width", c.width.to_string()),
                 ("coc_centred", c.centred.to_string()),
+                ("coc_modulate_base", c.modulate_base.to_string()),
                 ("coc_compositor_channels", c.compositor_channels.to_string()),
             ]);
             if let Some(f) = &c.focus {
@@ -325,6 +327,7 @@ impl<'a> Reader<'a> {
             copies: self.number("coc_copies")?,
             width: self.number("coc_width")?,
             centred: self.text("coc_centred")? == "true",
+            modulate_base: self.text("coc_modulate_base")? == "true",
             compositor_channels: self.number("coc_compositor_channels")?,
             mlp,
             mlp_moments,
@@ -448,6 +451,7 @@ mod tests {
             copies: 5,
             width: 64,
             centred: true,
+            modulate_base: false,
             compositor_channels: 8,
             mlp: vec![0.25; 7],
             mlp_moments: moments(7, 1.0),

@@ -59,6 +59,12 @@ fn options() -> Vec<OptionSpec> {
             "cocog: subtract the copies' mean offset, so the CoC Gaussians sit around their base \
              (neither published source does)",
         ),
+        OptionSpec::bool(
+            "coc_modulate_base",
+            true,
+            "cocog: modulate the base set's scale and rotation too, as the released code does \
+             (test views render the base unmodulated)",
+        ),
         OptionSpec::float(
             "coc_head_init",
             1.0,
@@ -184,6 +190,7 @@ fn coc_config(req: &StageRequest, iterations: u32) -> Result<Option<CocTrainConf
     }
     c.compositor_channels = int(req, "compositor_channels", 1, 256)? as u32;
     c.net.centred = req.options.get_bool("coc_centred").unwrap_or(false);
+    c.net.modulate_base = req.options.get_bool("coc_modulate_base").unwrap_or(true);
     let head_init = req.options.get_f64("coc_head_init").unwrap_or(1.0);
     if !(0.0..=10.0).contains(&head_init) {
         return Err(StageError::Options(format!(
@@ -421,6 +428,8 @@ impl Stage for Train {
                 "variant": c.net.variant.name(),
                 "copies": c.net.copies,
                 "centred": c.net.centred,
+                "modulate_base": c.net.modulate_base,
+                "head_init": c.head_init_scale,
                 "blur_start": c.blur_start,
                 "composite_start": c.composite_start,
                 "compositor_channels": c.compositor_channels,

@@ -72,26 +72,31 @@ impl CocState {
         k: &CocCheckpoint,
     ) -> Result<Self, TrainError> {
         let net = config.net;
-        let want = (
+        let describe = |v: &str, m: u32, w: u32, c: bool, b: bool, f: u32| {
+            format!(
+                "(variant {v}, {m} copies, width {w}, centred {c}, base modulated {b}, {f} \
+                 compositor channels)"
+            )
+        };
+        let want = describe(
             net.variant.name(),
             net.copies,
             net.width,
             net.centred,
+            net.modulate_base,
             config.compositor_channels,
         );
-        let have = (
-            k.variant.as_str(),
+        let have = describe(
+            &k.variant,
             k.copies,
             k.width,
             k.centred,
+            k.modulate_base,
             k.compositor_channels,
         );
         if want != have {
             return Err(TrainError::Invalid(format!(
-                "the checkpoint's lens model is (variant {}, {} copies, width {}, centred {}, \
-                 {} compositor channels); this run asks for (variant {}, {} copies, width {}, \
-                 centred {}, {} compositor channels)",
-                have.0, have.1, have.2, have.3, have.4, want.0, want.1, want.2, want.3, want.4
+                "the checkpoint's lens model is {have}; this run asks for {want}"
             )));
         }
         let mut state = Self::new(ctx, config, 0);
@@ -138,6 +143,7 @@ impl CocState {
             copies: net.copies,
             width: net.width,
             centred: net.centred,
+            modulate_base: net.modulate_base,
             compositor_channels: self.config.compositor_channels,
             mlp: ctx.read(&self.weights, net.mlp().len)?,
             mlp_moments: download(ctx, &self.weights_m)?,
@@ -166,6 +172,7 @@ impl CocState {
             copies: net.copies,
             width: net.width,
             centred: net.centred,
+            modulate_base: net.modulate_base,
             compositor_channels: self.config.compositor_channels,
             mlp: ctx.read(&self.weights, net.mlp().len)?,
             compositor: ctx.read(&self.f_params, self.compositor.layout().len)?,
