@@ -184,7 +184,7 @@ fn exports_render_in_a_web_viewer_as_cocog_renders_them() {
     for q in rotated.rotations.chunks_exact_mut(4) {
         q.swap(1, 3);
     }
-    let mut transposed = splats.clone();
+    let mut transposed = splats;
     for row in transposed.sh_rest.chunks_exact_mut(45) {
         let channel_major: Vec<f32> = row.to_vec();
         for c in 0..3 {
