@@ -154,6 +154,11 @@ impl Options {
         let mut out = Map::new();
         for spec in specs {
             match given.get(&spec.name).filter(|v| !v.is_null()) {
+                // A text option whose text can be a number (a distance or "from:VIEW") takes a
+                // bare JSON number too, as its text.
+                Some(v) if spec.kind == OptionKind::String && v.is_number() => {
+                    out.insert(spec.name.clone(), Value::String(v.to_string()));
+                }
                 Some(v) if spec.kind.accepts(v) => {
                     if let Some(why) = spec.out_of_range(v) {
                         return Err(StageError::Options(format!(

@@ -11,6 +11,14 @@ use crate::EngineError;
 const PENDING: u8 = 0;
 const MAPPED: u8 = 1;
 const FAILED: u8 = 2;
+/// Largest size class that is allocated `depth + 1` slots at a time.
+const SMALL_CLASS: u64 = 1 << 16;
+
+/// Read sizes rounded up to a power of two (at least 256 bytes), so reads whose size drifts
+/// with the scene reuse slots.
+fn size_class(bytes: u64) -> u64 {
+    bytes.max(256).next_power_of_two()
+}
 
 #[derive(Debug)]
 struct Slot {
@@ -48,30 +56,36 @@ impl<T> Readback<T> {
     ) -> Result<(), EngineError> {
         let ctx = rec.ctx();
         let total: u64 = ranges.iter().map(|r| r.2.next_multiple_of(4)).sum();
-        // The smallest slot that fits: a plain step taking the one large slot under load
-        // would make the next logging step allocate another.
-        let best = self
-            .free
-            .iter()
-            .enumerate()
-            .filter(|(_, s)| s.buffer.size() >= total)
-            .min_by_key(|(_, s)| s.buffer.size())
-            .map(|(i, _)| i);
-        let slot = match best {
-            Some(i) => self.free.swap_remove(i),
-            None => {
+        let class = size_class(total);
+        // Slots are taken only by reads of their own size class, and a small class gets all
+        // the slots it can ever need at once (`depth` in flight plus the one recording): if
+        // slots were shared or grown on demand, how many exist would depend on how fast the GPU
+        // returned earlier reads, and a warm step could allocate.
+        if !self.free.iter().any(|s| s.buffer.size() == class) {
+            let count = if class <= SMALL_CLASS {
+                self.depth + 1
+            } else {
+                1
+            };
+            for _ in 0..count {
                 ctx.counters.buffer_created();
-                Slot {
+                self.free.push(Slot {
                     buffer: ctx.device.create_buffer(&wgpu::BufferDescriptor {
                         label: Some("readback slot"),
-                        size: total.max(16),
+                        size: class,
                         usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
                         mapped_at_creation: false,
                     }),
                     state: Arc::new(AtomicU8::new(PENDING)),
-                }
+                });
             }
-        };
+        }
+        let i = self
+            .free
+            .iter()
+            .position(|s| s.buffer.size() == class)
+            .expect("a slot of this class was just ensured");
+        let slot = self.free.swap_remove(i);
         let mut at = 0;
         for &(buffer, offset, bytes) in ranges {
             let len = bytes.next_multiple_of(4);

@@ -340,7 +340,8 @@ fn refocus_job(req: &StageRequest) -> Result<Option<RefocusJob>, StageError> {
                 Ok(d) if d.is_finite() && d > 0.0 => FocusChoice::Distance(d),
                 _ => {
                     return Err(StageError::Options(format!(
-                        "option 'focus_distance': expected a positive distance in scene units                          or from:VIEW, got {f:?}"
+                        "option 'focus_distance': expected a positive distance in scene units \
+                         or from:VIEW, got {f:?}"
                     )));
                 }
             },

@@ -132,11 +132,31 @@ fn photographed_lenses_pulls_and_focus_points() {
     )
     .unwrap();
     assert_eq!(s["lenses"][0]["focus_distance"], 3.0);
-    // A focus at a pixel: the surface it sees, a positive distance.
+    // A focus at a pixel: the distance of the surface the f64 reference sees there, taken
+    // at the most solid pixel of the test view (which shares the training view's pose).
+    let (_, reference) = reference_png();
+    let i = (0..reference.alpha.len())
+        .max_by(|&a, &b| reference.alpha[a].total_cmp(&reference.alpha[b]))
+        .unwrap();
+    let (x, y) = (i as u32 % reference.width, i as u32 / reference.width);
+    let cam = common::camera();
+    let (rx, ry) = (
+        (f64::from(x) + 0.5 - cam.cx) / cam.fx,
+        (f64::from(y) + 0.5 - cam.cy) / cam.fy,
+    );
+    let want = reference.depth[i] / reference.alpha[i] * (1.0 + rx * rx + ry * ry).sqrt();
     let out = tmp.path().join("at");
-    let s = render(&scene, &out, json!({"views": "a", "focus_at": "20,15"})).unwrap();
+    let s = render(
+        &scene,
+        &out,
+        json!({"views": "a", "focus_at": format!("{x},{y}")}),
+    )
+    .unwrap();
     let d = s["lenses"][0]["focus_distance"].as_f64().unwrap();
-    assert!(d > 1.5 && d < 6.0, "focus at the centre pixel: {d}");
+    assert!(
+        (d - want).abs() < 1e-3 * want,
+        "focus at ({x}, {y}): {d}, the reference sees {want}"
+    );
     // A pull: frames even in 1/distance, near to far.
     let out = tmp.path().join("pull");
     let s = render(&scene, &out, json!({"views": "a", "focus_sweep": "1:4:5"})).unwrap();
