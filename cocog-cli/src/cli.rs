@@ -241,8 +241,9 @@ pub struct PruneArgs {
 #[derive(Clone, Copy, ValueEnum)]
 pub enum Method {
     /// CoCoGaussian: circle-of-confusion Gaussians, for photos with depth-of-field blur.
-    /// Experimental: trains end to end and learns per-photo focus distances, but its sharp
-    /// renders do not yet beat 3dgs (BENCHMARKS.md); `--resume` is not supported for it yet.
+    /// Experimental: trains end to end, learns per-photo focus distances and writes a lens
+    /// model that `cocog render --focus-distance` refocuses with; its margin over 3dgs is
+    /// measured in BENCHMARKS.md and is not yet the paper's.
     Cocog,
     /// Plain 3D Gaussian Splatting, for sharp photos.
     #[value(name = "3dgs")]
