@@ -334,8 +334,8 @@ pub enum SchedulePreset {
     /// default of --method 3dgs.
     Auto,
     /// CoCoGaussian's released code (Deblurring 3DGS's density control): densify until
-    /// 20000, no opacity reset, depth-weighted pruning (range 3), D-SSIM weight 0.25, position
-    /// learning rate 3.2e-4; the default of --method cocog.
+    /// 20000, no opacity reset, depth-weighted pruning (range 3), the point addition at 2500,
+    /// D-SSIM weight 0.25, position learning rate 3.2e-4; the default of --method cocog.
     Deblur,
     /// INRIA 3DGS (2023) exactly, for comparison.
     Inria,
@@ -398,6 +398,19 @@ pub struct ScheduleArgs {
     /// (auto, inria), 3.2e-4 (deblur).
     #[arg(long = "position-lr", value_parser = finite)]
     pub position_lr: Option<f64>,
+    /// Deblurring 3DGS's point addition at this iteration (CoCoGaussian's released code:
+    /// 2500): candidates drawn in the Gaussians' box take the colour of their 4 nearest, then
+    /// every Gaussian restarts with a neighbour-sized round shape and opacity 0.1; 0 never.
+    /// Default 2500 (deblur), 0 (auto, inria).
+    #[arg(long = "add-points-at")]
+    pub add_points_at: Option<u32>,
+    /// Most points the addition draws; it draws min(this, the initial cloud's box volume /
+    /// 1.1³) and drops those with no Gaussian within --add-points-distance. Default 200000.
+    #[arg(long = "add-points-max")]
+    pub add_points_max: Option<u32>,
+    /// Drop candidates with no Gaussian this close, in scene units. Default 2.0.
+    #[arg(long = "add-points-distance", value_parser = finite)]
+    pub add_points_distance: Option<f64>,
 }
 
 /// A duration in seconds: finite and not negative.

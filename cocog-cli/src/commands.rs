@@ -138,6 +138,8 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
                 "prune_large" => s.prune_large, "opacity_reset_every" => s.opacity_reset_every,
                 "sh_every" => s.sh_every, "depth_prune_range" => s.depth_prune_range,
                 "lambda_dssim" => s.lambda_dssim, "position_lr" => s.position_lr,
+                "add_points_at" => s.add_points_at, "add_points_max" => s.add_points_max,
+                "add_points_distance" => s.add_points_distance,
             });
             run("train", &a.io.scene, &a.io.output, o)
         }

@@ -47,16 +47,8 @@ pub fn init_from_points(
         return Err(TrainError::Invalid("non-finite point position".into()));
     }
     let pts: Vec<[f64; 3]> = positions.iter().map(|p| p.map(f64::from)).collect();
-    let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&pts);
-    // The query point itself comes back first, so ask for one more than the 3 neighbours.
-    let k = NonZero::new(4.min(pts.len())).expect("at least two points");
     let mut g = GaussianParams::default();
-    for (p, c) in pts.iter().zip(colors) {
-        let near = tree.nearest_n::<SquaredEuclidean>(p, k);
-        // Drop exactly one entry for the point itself (duplicates of it still count).
-        let dists: Vec<f64> = near.iter().skip(1).map(|n| n.distance).collect();
-        let mean2 = (dists.iter().sum::<f64>() / dists.len() as f64).max(MIN_DIST2);
-        let log_scale = (0.5 * mean2.ln()) as f32;
+    for ((p, c), log_scale) in pts.iter().zip(colors).zip(neighbour_log_scales(&pts)) {
         g.means.push(p.map(|v| v as f32));
         g.log_scales.push([log_scale; 3]);
         g.quats.push([1.0, 0.0, 0.0, 0.0]);
@@ -64,6 +56,28 @@ pub fn init_from_points(
         g.sh.extend(c.map(rgb_to_sh));
     }
     Ok(g)
+}
+
+/// The isotropic log-scale INRIA gives a fresh Gaussian at each of `pts` (at least two): the
+/// log of the root mean squared distance to its 3 nearest other points (`distCUDA2`).
+pub fn neighbour_log_scales(pts: &[[f64; 3]]) -> Vec<f32> {
+    let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(pts);
+    // The query point itself comes back first, so ask for one more than the 3 neighbours.
+    let k = NonZero::new(4.min(pts.len()).max(1)).expect("at least one");
+    pts.iter()
+        .map(|p| {
+            let near = tree.nearest_n::<SquaredEuclidean>(p, k);
+            // Drop exactly one entry for the point itself (duplicates of it still count).
+            let dists: Vec<f64> = near.iter().skip(1).map(|n| n.distance).collect();
+            let mean2 = (dists.iter().sum::<f64>() / dists.len().max(1) as f64).max(MIN_DIST2);
+            (0.5 * mean2.ln()) as f32
+        })
+        .collect()
+}
+
+/// Opacity logit of a fresh Gaussian (0.1).
+pub fn initial_opacity_logit() -> f32 {
+    inverse_sigmoid(INIT_OPACITY)
 }
 
 /// INRIA `getNerfppNorm` radius: 1.1 × the largest distance of a camera centre from the mean

@@ -11,6 +11,7 @@
 //! The GPU backward accumulates gradients with float atomics, whose summation order varies,
 //! so parameters agree between runs only to rounding.
 
+mod add_points;
 mod bench;
 mod checkpoint;
 mod coc_config;
@@ -25,6 +26,7 @@ mod stage;
 mod stats;
 mod trainer;
 
+pub use add_points::{add_points, box_volume, candidate_count};
 pub use bench::{BenchOptions, BenchReport, KernelMs, PhaseMs, run_bench};
 pub use checkpoint::{
     CHECKPOINT_FILE, CheckpointError, CocCheckpoint, FocusState, MomentState, TrainState,

@@ -340,6 +340,15 @@ impl Stage for Train {
             .scene_scale(&cameras, &points.means)
             .map_err(|e| StageError::Input(format!("{}: {e}", req.input.display())))?;
         plan.config.scene_scale = Some(scene_scale);
+        // The addition's size follows the initial cloud (method.md §8.1), also when resuming.
+        let volume = crate::box_volume(&points.means);
+        for d in [&mut plan.schedule.densify]
+            .into_iter()
+            .chain(plan.config.densify.as_mut())
+        {
+            d.add_points_count =
+                crate::candidate_count(volume, d.add_points_count).min(u32::MAX as usize) as u32;
+        }
         let schedule = plan.schedule.record(scene_scale);
         let init = match &resume {
             Some(state) => state.params.clone(),

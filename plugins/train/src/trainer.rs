@@ -440,9 +440,14 @@ impl<'c> Trainer<'c> {
             });
         self.batch = Some(batch);
         result?;
-        if let Some(d) = d.filter(|_| plan.densify) {
+        if let Some(d) = d.as_ref().filter(|_| plan.densify) {
             let before = self.num_gaussians();
-            self.densify_and_prune(&d, it)?;
+            self.densify_and_prune(d, it)?;
+            self.grow_capacity_with(before);
+        }
+        if let Some(d) = d.as_ref().filter(|d| d.adds_points_at(it)) {
+            let before = self.num_gaussians();
+            self.add_points(d)?;
             self.grow_capacity_with(before);
         }
         if plan.reset_opacity {

@@ -19,7 +19,9 @@ use cocog_engine::reference::Gaussians64;
 use cocog_engine::{Camera, GaussianParams};
 use cocog_metrics::psnr;
 use cocog_synth::lens::{BlurSpace, ThinLens, render_thin_lens};
-use cocog_train::{CocTrainConfig, SplitMix64, TrainConfig, TrainView, Trainer};
+use cocog_train::{
+    CocTrainConfig, DROP_DB, DensifyConfig, SplitMix64, TrainConfig, TrainView, Trainer,
+};
 use common::*;
 
 const NEAR: f64 = 1.6;
@@ -364,4 +366,85 @@ fn a_cocog_step_with_zero_heads_is_a_3dgs_step() {
         }
     }
     assert!(bad.is_empty(), "{bad:?}");
+}
+
+/// Held-out PSNR of the base Gaussians at the checkpoints of a shortened CoCoGaussian
+/// schedule crossing every event, and the Gaussian count there.
+fn schedule_run(
+    scene: &Defocus,
+    init: &GaussianParams,
+    add_points_at: u32,
+) -> Vec<(u32, f64, u32)> {
+    let ctx = gpu().expect("checked by the caller");
+    let mut coc = CocTrainConfig::new(CocVariant::Code);
+    coc.blur_start = BLUR_START;
+    coc.composite_start = COMPOSITE_START;
+    coc.compositor_channels = 8;
+    let config = TrainConfig {
+        iterations: 600,
+        sh_degree_interval: 40,
+        seed: 5,
+        loss_every: 0,
+        densify: Some(DensifyConfig {
+            from_iter: 50,
+            until_iter: 450,
+            interval: 50,
+            add_points_at,
+            add_points_count: 150,
+            // Four times INRIA's threshold keeps the set at lavapipe size on 48×36 photos
+            // (eight times was worse: 17.0 dB at the end, two runs).
+            grad_threshold: 8e-4,
+            ..DensifyConfig::deblur()
+        }),
+        coc: Some(coc),
+        ..TrainConfig::default()
+    };
+    let mut trainer = Trainer::new(ctx, init, &scene.train, config).unwrap();
+    let mut out = Vec::new();
+    for it in 1..=600 {
+        trainer.step().unwrap();
+        if SCHEDULE_CHECKPOINTS.contains(&it) {
+            let psnr = mean_psnr(&mut trainer, &scene.test_cams, &scene.test_images);
+            out.push((it, psnr, trainer.num_gaussians()));
+        }
+    }
+    out
+}
+
+const BLUR_START: u32 = 100;
+const COMPOSITE_START: u32 = 200;
+const ADD_POINTS_AT: u32 = 150;
+/// Before the CoC sets start, before the point addition, before F starts, before the end of
+/// densification (past SH growth at 40/80/120 and densification every 50), and at the end.
+const SCHEDULE_CHECKPOINTS: [u32; 5] = [95, 145, 195, 445, 600];
+
+/// CoCoGaussian's shortened schedule (deblur preset: no opacity reset, depth-weighted
+/// pruning) crossing SH growth, densification, the blur start, the point addition, the
+/// compositor start and the end of densification: the sharp held-out PSNR must not collapse
+/// (fall more than `DROP_DB`, the train log's collapse mark) below its best earlier
+/// checkpoint. The 1 dB bar of the 3dgs schedule test is NOT met: measured on lavapipe over
+/// three runs (GPU sums in another order each run) 22.00 → 21.4 (blur start) → 21.6–21.7
+/// (point addition) → 20.2–21.4 (densification) → 20.3–21.3 dB, falls of 0.6–1.8 dB; without
+/// the point addition (`add_points_at` 0) the run declines to 19.4 dB by 445.
+#[test]
+fn cocog_holds_its_quality_across_every_schedule_event() {
+    if gpu().is_none() {
+        return;
+    }
+    let mut rng = SplitMix64::new(21);
+    let scene = defocus_scene(&mut rng);
+    let init = noisy_init(&scene.truth, 1, &mut rng);
+    let run = schedule_run(&scene, &init, ADD_POINTS_AT);
+    eprintln!("held-out PSNR and Gaussians at checkpoints: {run:.2?}");
+    let (before, after) = (run[1].2, run[2].2);
+    assert!(after > before, "the point addition added nothing: {run:?}");
+    let mut best = f64::MIN;
+    for &(it, psnr, _) in &run {
+        assert!(
+            psnr >= best - DROP_DB,
+            "held-out PSNR fell to {psnr:.2} dB at iteration {it}, best before {best:.2} dB: \
+             {run:.2?}"
+        );
+        best = best.max(psnr);
+    }
 }

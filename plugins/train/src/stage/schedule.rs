@@ -137,6 +137,21 @@ impl Schedule {
             }
             d.depth_prune_range = v;
         }
+        if let Some(v) = count("add_points_at", 0)? {
+            d.add_points_at = v;
+        }
+        if let Some(v) = count("add_points_max", 0)? {
+            d.add_points_count = v;
+        }
+        if let Some(v) = o.get_f64("add_points_distance") {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(StageError::Options(format!(
+                    "stage 'train' option 'add_points_distance' must be a positive length in \
+                     scene units, got {v}"
+                )));
+            }
+            d.add_points_distance = v as f32;
+        }
         if let Some(v) = fraction("lambda_dssim", 1.0)? {
             s.lambda_dssim = v;
         }
@@ -188,6 +203,9 @@ impl Schedule {
             "prune_large": tidy(d.prune_large),
             "opacity_reset_every": d.opacity_reset_interval,
             "depth_prune_range": tidy(d.depth_prune_range),
+            "add_points_at": d.add_points_at,
+            "add_points_count": d.add_points_count,
+            "add_points_distance": tidy(d.add_points_distance),
             "sh_every": self.sh_interval,
             "lambda_dssim": tidy(self.lambda_dssim),
             "position_lr": self.position_lr,
@@ -222,7 +240,7 @@ pub fn options() -> Vec<OptionSpec> {
             "density-control preset: auto (INRIA's rules without the large-Gaussian prune, \
              which deletes the background of forward-facing captures; 3dgs's default), deblur \
              (CoCoGaussian's released code: no opacity reset, depth-weighted pruning, densify \
-             until 20000, λ 0.25, position lr 3.2e-4; cocog's default) or inria (the original \
+             until 20000, point addition at 2500, λ 0.25, position lr 3.2e-4; cocog's default) or inria (the original \
              rules exactly)",
         ),
         string(
@@ -263,6 +281,23 @@ pub fn options() -> Vec<OptionSpec> {
             "depth_prune_range",
             "divide the prune threshold by up to this for the farthest Gaussians (Deblurring \
              3DGS; 1 uniform; auto 1, deblur 3)",
+        ),
+        int(
+            "add_points_at",
+            "Deblurring 3DGS's point addition at this iteration (the released CoCoGaussian: \
+             2500): up to add_points_max candidates in the robust box of the Gaussians, each \
+             coloured from its 4 nearest within add_points_distance, then every Gaussian \
+             re-initialised (neighbour scale, opacity 0.1); 0 never (auto and inria 0, deblur \
+             2500)",
+        ),
+        int(
+            "add_points_max",
+            "most points the addition draws; it draws min(this, initial cloud box volume / \
+             1.1³) (200000)",
+        ),
+        float(
+            "add_points_distance",
+            "candidates with no Gaussian this close (scene units) are dropped (2.0)",
         ),
         float(
             "lambda_dssim",

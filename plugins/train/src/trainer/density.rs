@@ -76,6 +76,27 @@ impl Trainer<'_> {
         Ok(plan)
     }
 
+    /// Deblurring 3DGS's point addition (method.md §8.1): new Gaussians, every shape
+    /// re-initialised, Gaussian Adam moments and statistics restarted (the released code
+    /// rebuilds its optimizer here). h_θ, F and the focus distances keep their moments: that
+    /// they restart there is a side effect of one optimizer holding everything. Returns how
+    /// many points were added.
+    pub(super) fn add_points(&mut self, config: &DensifyConfig) -> Result<usize, TrainError> {
+        let ctx = self.ctx;
+        let g = self.gaussians()?;
+        let (dense, added) = crate::add_points(
+            &g,
+            config.add_points_count as usize,
+            f64::from(config.add_points_distance),
+            &mut self.rng,
+        );
+        let params = ParamBuffers::upload(ctx, &[&dense])?;
+        self.stats.reset(ctx, params.num_gaussians);
+        self.moments = Moments::new(ctx, &params);
+        *self.params_mut()? = params;
+        Ok(added)
+    }
+
     /// INRIA `reset_opacity`: opacity ≤ 0.01 everywhere, and fresh Adam moments for it, on
     /// the GPU (queued behind this iteration's step).
     pub(super) fn reset_opacity(&mut self) -> Result<(), TrainError> {
