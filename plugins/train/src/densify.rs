@@ -107,9 +107,9 @@ impl DensifyConfig {
 
     /// CoCoGaussian's (and Deblurring 3DGS's) policy, from the released code: densify until
     /// 20000, no opacity reset, no large-Gaussian prune, depth-weighted pruning over a range
-    /// of 3, the point addition at 2500. On the tiny thin-lens test scene the addition's
-    /// re-initialisation held the sharp held-out PSNR (21.3 dB at the end) where the run
-    /// without it declined to 20.0 dB (`gpu_coc_train.rs`).
+    /// of 3, the point addition at 2500. Kept for fidelity: on the tiny thin-lens test scene
+    /// (`gpu_coc_train.rs`) runs with it ended at 18.9–21.3 dB and one without it at 20.0 dB,
+    /// which decides nothing.
     pub fn deblur() -> Self {
         Self {
             until_iter: 20_000,
