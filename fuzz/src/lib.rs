@@ -264,6 +264,35 @@ fn train_state(n: usize, sh_degree: u32) -> TrainState {
         rng: 0x0123_4567_89ab_cdef,
         order_rng: 42,
         order_stack: vec![3, 1, 2],
+        coc: None,
+    }
+}
+
+/// A cocog checkpoint's lens-model part (h_θ, F, per-view focus and aperture with moments).
+fn coc_checkpoint(views: usize) -> cocog_train::CocCheckpoint {
+    let moments = |len: usize| MomentState {
+        m: vec![0.25; len],
+        v: vec![0.5; len],
+    };
+    cocog_train::CocCheckpoint {
+        variant: "lens".into(),
+        copies: 4,
+        width: 64,
+        centred: true,
+        modulate_base: false,
+        compositor_channels: 8,
+        mlp: vec![0.1; 12],
+        mlp_moments: moments(12),
+        compositor: vec![-0.2; 6],
+        compositor_moments: moments(6),
+        focus: Some(cocog_train::FocusState {
+            values: vec![1.5; views],
+            moments: moments(views),
+            apertures: vec![0.01; views],
+            aperture_moments: moments(views),
+            scale: 2.0,
+            origin: [0.1, -0.2, 0.3],
+        }),
     }
 }
 
@@ -417,7 +446,12 @@ pub fn seeds(name: &str) -> Vec<(String, Vec<u8>)> {
         "checkpoint" => {
             for (n, degree) in [(2, 0), (1, 3)] {
                 let dir = scratch().join("seed-checkpoint");
-                let path = train_state(n, degree).save(&dir).expect("write checkpoint");
+                let mut state = train_state(n, degree);
+                // One seed carries a cocog lens model, so its metadata and tensors are fuzzed.
+                if degree == 3 {
+                    state.coc = Some(coc_checkpoint(state.views as usize));
+                }
+                let path = state.save(&dir).expect("write checkpoint");
                 out.push((
                     format!("state-n{n}-sh{degree}.safetensors"),
                     std::fs::read(path).expect("read seed back"),
