@@ -479,6 +479,12 @@ pub struct RenderArgs {
     /// Only these views: comma-separated names or stems (e.g. 000,008). Default: the split.
     #[arg(long)]
     pub views: Option<String>,
+    /// New cameras instead of the scene's views, from a JSON file in scene.json's convention:
+    /// {"world_from_camera": [[4 numbers] × 4] (OpenCV axes: x right, y down, z forward),
+    /// "camera": a scene camera id for the intrinsics (default: the first training view's),
+    /// "name": the output's stem} or a list of them. Works with every refocus option.
+    #[arg(long, conflicts_with = "views")]
+    pub camera: Option<PathBuf>,
     /// Refocus: the distance in focus from the camera centre, in scene units, or
     /// from:VIEW for a training photo's learned focus distance (and aperture).
     #[arg(long = "focus-distance")]
@@ -497,7 +503,7 @@ pub struct RenderArgs {
     /// (mean). Default learned.
     #[arg(long)]
     pub composite: Option<String>,
-    /// A focus pull over one view (--views NAME): NEAR:FAR:FRAMES, focus distances even in
+    /// A focus pull over one view (--views NAME, or --camera with one camera): NEAR:FAR:FRAMES, focus distances even in
     /// 1/distance (as a lens's focus ring). -o FILE.gif writes an animation, FILE.mp4 needs
     /// ffmpeg on PATH, a folder gets the frames as PNG.
     #[arg(long = "focus-sweep")]

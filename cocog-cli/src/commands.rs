@@ -167,6 +167,7 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
                 "as_photographed" => a.as_photographed.then_some(true),
                 "aperture" => a.aperture, "composite" => a.composite.clone(),
                 "views" => a.views.clone(), "depth" => a.depth.then_some(true),
+                "camera" => a.camera.as_ref().map(|p| p.display().to_string()),
             };
             match &a.focus_sweep {
                 Some(sweep) => crate::sweep::run(&registry, a, sweep, o, g, ctx),

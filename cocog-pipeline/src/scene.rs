@@ -294,7 +294,9 @@ fn check_header(path: &Path, raw: &Value) -> Result<(), SceneError> {
     }
 }
 
-fn check_pose(m: &[[f64; 4]; 4]) -> Result<(), String> {
+/// Whether `m` is a rigid pose: finite, last row [0, 0, 0, 1], orthonormal rotation; the
+/// message says what is wrong.
+pub fn check_pose(m: &[[f64; 4]; 4]) -> Result<(), String> {
     if m.iter().flatten().any(|v| !v.is_finite()) {
         return Err("contains NaN or infinite values".to_owned());
     }

@@ -93,6 +93,7 @@ impl Stage for EvalScene {
             views: Vec::new(),
             refocus: None,
             sweep: Vec::new(),
+            camera_file: None,
         };
         let opts = eval_options(req)?;
         // Beside the output, so the renders sit on the same disk and vanish with the stage.

@@ -7,12 +7,14 @@
 
 mod cameras;
 mod eval_scene;
+mod pose_file;
 mod refocus;
 mod render_stage;
 mod renderer;
 
 pub use cameras::{NamedCamera, parse_split, split_cameras, split_name};
 pub use eval_scene::EvalScene;
+pub use pose_file::cameras_from_file;
 pub use refocus::{FocusChoice, LensScene, RefocusJob, distance_at};
 pub use render_stage::Render;
 pub use renderer::{SceneRenderer, load_gaussians};

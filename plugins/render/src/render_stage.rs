@@ -32,6 +32,8 @@ pub(crate) struct RenderJob {
     pub refocus: Option<RefocusJob>,
     /// A focus pull: these focus distances over the one view, as `frame-NNN.png`.
     pub sweep: Vec<f64>,
+    /// New cameras from this JSON file instead of the scene's views.
+    pub camera_file: Option<std::path::PathBuf>,
 }
 
 pub(crate) fn split_option() -> OptionSpec {
@@ -110,10 +112,19 @@ pub(crate) fn render_views(
 ) -> Result<Value, StageError> {
     let mut scene = Scene::load(scene_dir)?;
     scene.rebase(scene_dir)?;
-    let cameras = select(
-        split_cameras(&scene, scene_dir, job.split, job.downscale)?,
-        &job.views,
-    )?;
+    let cameras = match &job.camera_file {
+        Some(path) => crate::cameras_from_file(path, &scene, scene_dir, job.downscale)?,
+        None => select(
+            split_cameras(&scene, scene_dir, job.split, job.downscale)?,
+            &job.views,
+        )?,
+    };
+    if !job.sweep.is_empty() && cameras.len() != 1 {
+        return Err(StageError::Options(format!(
+            "option 'focus_sweep' pulls focus over one view; the camera file has {}",
+            cameras.len()
+        )));
+    }
     let gaussians = load_gaussians(&scene, scene_dir)?;
     let lens_scene = match &job.refocus {
         Some(_) => Some(LensScene::load(&scene, scene_dir)?),
@@ -277,10 +288,10 @@ pub fn sweep_distances(text: &str) -> Result<Vec<f64>, StageError> {
 
 /// `job` as a focus pull: one view, the sweep's distances, the other lens options kept.
 fn sweep_job(mut job: RenderJob, text: &str) -> Result<RenderJob, StageError> {
-    if job.views.len() != 1 {
+    if job.views.len() != 1 && job.camera_file.is_none() {
         return Err(StageError::Options(
             "option 'focus_sweep' pulls focus over one view: name it with option 'views' \
-             (--views NAME)"
+             (--views NAME), or give one new camera with option 'camera'"
                 .into(),
         ));
     }
@@ -395,6 +406,14 @@ impl Stage for Render {
                     "only these views, comma-separated names or stems (default: the whole split)",
                 ),
                 OptionSpec::optional(
+                    "camera",
+                    OptionKind::Path,
+                    "render new cameras instead of the scene's views: a JSON file with one \
+                     {\"world_from_camera\": 4×4 rows, \"camera\": scene camera id, \"name\"} \
+                     or a list of them (scene.json's convention; camera defaults to the first \
+                     training view's)",
+                ),
+                OptionSpec::optional(
                     "focus_distance",
                     OptionKind::String,
                     "refocus (cocog scenes): distance in focus from the camera centre, in scene \
@@ -451,7 +470,13 @@ impl Stage for Render {
             views,
             refocus: refocus_job(req)?,
             sweep: Vec::new(),
+            camera_file: o.get_path("camera"),
         };
+        if job.camera_file.is_some() && !job.views.is_empty() {
+            return Err(StageError::Options(
+                "choose either option 'views' (the scene's views) or 'camera' (new ones)".into(),
+            ));
+        }
         let job = match o.get_str("focus_sweep") {
             None => job,
             Some(text) => sweep_job(job, text)?,

@@ -228,3 +228,92 @@ fn bad_refocus_requests_name_what_is_wrong_and_write_nothing() {
         std::fs::remove_dir(&out).unwrap();
     }
 }
+
+/// `camera`: new cameras from a JSON file render as the scene's own views do at the same
+/// pose (sharp and refocused, bit for bit), a moved camera sees something else, and bad
+/// files fail naming the file, the camera and the field, with nothing written.
+#[test]
+fn new_cameras_from_a_pose_file() {
+    if !gpu_available() {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = tmp.path().join("scene");
+    cocog_scene(&scene, CocVariant::Code);
+    let pose = |x: f64| {
+        json!([
+            [1.0, 0.0, 0.0, x],
+            [0.0, 1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0, 0.0],
+            [0.0, 0.0, 0.0, 1.0]
+        ])
+    };
+    let file = tmp.path().join("cameras.json");
+    std::fs::write(
+        &file,
+        json!([
+            {"name": "same", "world_from_camera": pose(0.0), "camera": 1},
+            {"name": "moved", "world_from_camera": pose(0.3)}
+        ])
+        .to_string(),
+    )
+    .unwrap();
+    for refocus in [json!({}), json!({"focus_distance": 2.5, "aperture": 3.0})] {
+        let mut given = refocus.as_object().unwrap().clone();
+        given.insert("views".into(), json!("a"));
+        let views = tmp.path().join("views");
+        render(&scene, &views, Value::Object(given.clone())).unwrap();
+        given.remove("views");
+        given.insert("camera".into(), json!(file));
+        let novel = tmp.path().join("novel");
+        let s = render(&scene, &novel, Value::Object(given)).unwrap();
+        assert_eq!(s["views"], 2);
+        let a = png(&views.join("a.png"));
+        assert_eq!(
+            png(&novel.join("same.png")),
+            a,
+            "{refocus}: same pose, same render"
+        );
+        let moved = png(&novel.join("moved.png"));
+        let differ = moved.iter().zip(&a).filter(|(p, q)| p != q).count();
+        assert!(
+            differ > a.len() / 10,
+            "{refocus}: a moved camera sees the same"
+        );
+        std::fs::remove_dir_all(&views).unwrap();
+        std::fs::remove_dir_all(&novel).unwrap();
+    }
+
+    let bad_cases = [
+        (
+            json!({"world_from_camera": [[1.0, 0.5, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]}),
+            vec!["camera 0", "world_from_camera", "orthonormal"],
+        ),
+        (
+            json!([{"world_from_camera": pose(0.0), "camera": 7}]),
+            vec!["camera 0", "`camera` 7", "ids: 1"],
+        ),
+        (
+            json!({"pose": 1}),
+            vec!["world_from_camera", "expected a camera"],
+        ),
+        (json!([]), vec!["empty"]),
+    ];
+    for (content, needles) in bad_cases {
+        std::fs::write(&file, content.to_string()).unwrap();
+        let out = tmp.path().join("bad");
+        let err = render(&scene, &out, json!({"camera": file})).unwrap_err();
+        assert!(matches!(err, StageError::Input(_)), "{err:?}");
+        for n in needles.iter().chain(&["cameras.json"]) {
+            assert!(err.to_string().contains(n), "{n:?} not in {err}");
+        }
+        assert_eq!(std::fs::read_dir(&out).unwrap().count(), 0, "{content}");
+    }
+    let err = render(
+        &scene,
+        &tmp.path().join("both"),
+        json!({"camera": file, "views": "a"}),
+    )
+    .unwrap_err();
+    assert!(err.to_string().contains("either"), "{err}");
+}
