@@ -20,6 +20,7 @@ mod runner_tests;
 pub mod scene;
 pub mod stage;
 pub mod testing;
+mod travel;
 
 pub use context::{Context, LogLevel, NullContext};
 pub use options::{OptionKind, OptionSpec, Options};

@@ -146,6 +146,7 @@ pub fn run_stage(
         })?;
     }
     if entry.info.output == OutputKind::Dir && staging.path().join(MANIFEST).exists() {
+        crate::travel::take_along(staging.path())?;
         record_history(
             staging.path(),
             entry,

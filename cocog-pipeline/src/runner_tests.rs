@@ -131,3 +131,75 @@ fn a_superseded_checkpoint_and_log_are_removed_after_the_commit_and_only_then() 
         assert_eq!(log.exists(), kept, "superseded: {done}");
     }
 }
+
+/// Writes its input scene with every reference made absolute, as real stages do, and a file
+/// of its own named like the input's Gaussians.
+struct Rebasing;
+
+impl Stage for Rebasing {
+    fn info(&self) -> StageInfo {
+        StageInfo {
+            name: "rebasing".into(),
+            kind: StageKind::Transform,
+            output: OutputKind::Dir,
+            description: "test stage".into(),
+            options: vec![],
+        }
+    }
+
+    fn run(&self, req: &StageRequest, _ctx: &dyn Context) -> Result<Value, StageError> {
+        let mut scene = Scene::load(&req.input)?;
+        scene.rebase(&req.input)?;
+        std::fs::write(req.output.join("gaussians.ply"), b"own").unwrap();
+        scene.save(&req.output)?;
+        Ok(json!({}))
+    }
+}
+
+#[test]
+fn a_scene_output_carries_its_model_files_and_outlives_its_input() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = tmp.path().join("in");
+    std::fs::create_dir(&input).unwrap();
+    let mut scene = one_view_scene();
+    scene.points = Some("points.ply".into());
+    scene.gaussians = Some("gaussians.ply".into());
+    scene.lens_model = Some("lens-model.safetensors".into());
+    scene.save(&input).unwrap();
+    for (file, text) in [
+        ("points.ply", "points"),
+        ("gaussians.ply", "upstream"),
+        ("lens-model.safetensors", "lens"),
+        ("a.png", "photo"),
+    ] {
+        std::fs::write(input.join(file), text).unwrap();
+    }
+    let stage: Arc<dyn Stage> = Arc::new(Rebasing);
+    let entry = StageEntry {
+        info: stage.info(),
+        stage,
+        provider: Provider::BuiltIn,
+    };
+    let out = tmp.path().join("out");
+    run_stage(&entry, &input, &out, &Map::new(), false, &NullContext).unwrap();
+    // The model files are copied and referenced relatively; the stage's own file is kept and
+    // the input's of the same name gets another; photos stay where they are.
+    std::fs::remove_file(input.join("points.ply")).unwrap();
+    std::fs::remove_file(input.join("gaussians.ply")).unwrap();
+    std::fs::remove_file(input.join("lens-model.safetensors")).unwrap();
+    let s = Scene::load(&out).unwrap();
+    let read = |stored: &Option<String>| {
+        let stored = stored.as_deref().unwrap();
+        assert!(!Path::new(stored).is_absolute(), "{stored}");
+        std::fs::read_to_string(Scene::resolve(&out, stored)).unwrap()
+    };
+    assert_eq!(read(&s.points), "points");
+    assert_eq!(read(&s.gaussians), "upstream");
+    assert_eq!(read(&s.lens_model), "lens");
+    assert_eq!(
+        std::fs::read_to_string(out.join("gaussians.ply")).unwrap(),
+        "own"
+    );
+    assert!(Path::new(&s.views[0].image).is_absolute());
+    assert_eq!(std::fs::read_to_string(&s.views[0].image).unwrap(), "photo");
+}

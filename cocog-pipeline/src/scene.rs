@@ -211,6 +211,7 @@ impl Scene {
         }
         self.points.as_mut().map(abs);
         self.gaussians.as_mut().map(abs);
+        self.lens_model.as_mut().map(abs);
         Ok(())
     }
 

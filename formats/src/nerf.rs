@@ -371,6 +371,27 @@ pub fn read_dataset(dir: &Path) -> Result<Vec<NerfFrame>> {
     Ok(frames)
 }
 
+/// The point cloud a dataset's `transforms.json` names (`ply_file_path`, nerfstudio's seed
+/// points, in the poses' world frame), resolved against its folder; `None` when it names none
+/// or the dataset is Blender's split files.
+pub fn ply_file_path(dir: &Path) -> Result<Option<std::path::PathBuf>> {
+    let path = dir.join("transforms.json");
+    if !path.is_file() {
+        return Ok(None);
+    }
+    let root: Value = serde_json::from_str(&read_text(&path)?)
+        .map_err(|e| FormatError::invalid(&path, "json", e.to_string()))?;
+    match root.get("ply_file_path") {
+        None | Some(Value::Null) => Ok(None),
+        Some(Value::String(p)) => Ok(Some(dir.join(p))),
+        Some(other) => Err(FormatError::invalid(
+            &path,
+            "ply_file_path",
+            format!("expected a relative path to a PLY point cloud, got {other}"),
+        )),
+    }
+}
+
 /// One frame to write: pose in OpenCV axes, pinhole intrinsics and image size.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NerfFrameOut {
@@ -384,9 +405,17 @@ pub struct NerfFrameOut {
 
 /// Writes a nerfstudio-style `transforms.json` with per-frame intrinsics (and top-level ones when
 /// every frame shares them, for tools that read only those).
-pub fn write_transforms(path: &Path, frames: &[NerfFrameOut]) -> Result<()> {
+pub fn write_transforms(
+    path: &Path,
+    frames: &[NerfFrameOut],
+    ply_file_path: Option<&str>,
+) -> Result<()> {
     let mut top = Map::new();
     top.insert("camera_model".into(), json!("PINHOLE"));
+    // nerfstudio's initial point cloud (splatfacto seeds from it), relative to the file.
+    if let Some(p) = ply_file_path {
+        top.insert("ply_file_path".into(), json!(p));
+    }
     let intr = |f: &NerfFrameOut| json!({"fl_x": f.intrinsics.fx, "fl_y": f.intrinsics.fy, "cx": f.intrinsics.cx, "cy": f.intrinsics.cy, "w": f.width, "h": f.height});
     if let Some(first) = frames.first().filter(|f0| {
         frames

@@ -241,7 +241,7 @@ fn transforms_round_trip_and_bad_input() {
         .collect();
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("transforms.json");
-    nerf::write_transforms(&p, &out).unwrap();
+    nerf::write_transforms(&p, &out, None).unwrap();
     let back = nerf::read_dataset(dir.path()).unwrap();
     for (a, b) in out.iter().zip(&back) {
         assert_eq!(a.file_path, b.file_path);

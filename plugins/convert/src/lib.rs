@@ -4,7 +4,8 @@
 //! - `to = "colmap"`: `sparse/0/{cameras,images,points3D}.txt` (PINHOLE cameras, the scene's
 //!   point cloud as points without tracks) + `images/`.
 //! - `to = "nerf"`: nerfstudio-style `transforms.json` (OpenGL camera-to-world, per-frame
-//!   intrinsics and split) + `images/`.
+//!   intrinsics and split, `ply_file_path` naming the scene's points copied as `points.ply`)
+//!   + `images/`.
 
 use std::path::Path;
 
@@ -114,7 +115,7 @@ fn to_colmap(scene: &Scene, input: &Path, out: &Path) -> Result<(), StageError> 
     .map_err(input_error)
 }
 
-fn to_nerf(scene: &Scene, out: &Path) -> Result<(), StageError> {
+fn to_nerf(scene: &Scene, input: &Path, out: &Path) -> Result<(), StageError> {
     let frames: Vec<NerfFrameOut> = scene
         .views
         .iter()
@@ -143,7 +144,17 @@ fn to_nerf(scene: &Scene, out: &Path) -> Result<(), StageError> {
             }
         })
         .collect();
-    write_transforms(&out.join("transforms.json"), &frames).map_err(input_error)
+    // The points go along as a PLY the transforms name, in the same world frame.
+    let ply = match &scene.points {
+        Some(stored) => {
+            let src = Scene::resolve(input, stored);
+            let dst = out.join("points.ply");
+            std::fs::copy(&src, &dst).map_err(|e| StageError::io(&src, e))?;
+            Some("points.ply")
+        }
+        None => None,
+    };
+    write_transforms(&out.join("transforms.json"), &frames, ply).map_err(input_error)
 }
 
 impl Stage for Convert {
@@ -170,7 +181,7 @@ impl Stage for Convert {
         if to == "colmap" {
             to_colmap(&scene, &req.input, &req.output)?;
         } else {
-            to_nerf(&scene, &req.output)?;
+            to_nerf(&scene, &req.input, &req.output)?;
         }
         copy_images(&scene, &req.input, &req.output, ctx)?;
         ctx.info(&format!(

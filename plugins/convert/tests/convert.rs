@@ -106,11 +106,20 @@ fn colmap_and_nerf_round_trip() {
         json!({}),
     )
     .unwrap();
-    assert_same(
-        &original,
-        &Scene::load(&t.join("back-nerf")).unwrap(),
-        1e-12,
-    );
+    let back = Scene::load(&t.join("back-nerf")).unwrap();
+    assert_same(&original, &back, 1e-12);
+    // The points travel too: named by `ply_file_path` and read back by ingest nerf.
+    let transforms: Value =
+        serde_json::from_str(&std::fs::read_to_string(t.join("as-nerf/transforms.json")).unwrap())
+            .unwrap();
+    assert_eq!(transforms["ply_file_path"], "points.ply");
+    let stored = back
+        .points
+        .as_deref()
+        .expect("ingest nerf reads ply_file_path");
+    let p2 =
+        cocog_formats::ply::read_points(&Scene::resolve(&t.join("back-nerf"), stored)).unwrap();
+    assert_eq!(p0, p2);
 
     let err = run(
         Box::new(cocog_convert::Convert),

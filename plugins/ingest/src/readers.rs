@@ -186,7 +186,8 @@ pub(crate) fn read_llff(dataset: &Path) -> Result<Ingested, StageError> {
 }
 
 /// A NeRF dataset: `transforms.json` or Blender's `transforms_{train,test}.json`. Frames keep
-/// the file's split. No points: the file's world frame need not match any COLMAP model.
+/// the file's split. Points only from the file's own `ply_file_path` (its world frame need not
+/// match any COLMAP model beside it).
 pub(crate) fn read_nerf(dataset: &Path) -> Result<Ingested, StageError> {
     let frames = nerf::read_dataset(dataset).map_err(input_error)?;
     let views = frames
@@ -254,9 +255,13 @@ pub(crate) fn read_nerf(dataset: &Path) -> Result<Ingested, StageError> {
             }
         })
         .collect();
+    let points = match nerf::ply_file_path(dataset).map_err(input_error)? {
+        Some(p) => Some(cocog_formats::ply::read_points(&p).map_err(input_error)?),
+        None => None,
+    };
     Ok(Ingested {
         views,
-        points: None,
+        points,
         bounds: None,
         hold_marker: llff::read_hold_marker(dataset).map_err(input_error)?,
     })
