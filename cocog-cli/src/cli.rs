@@ -307,6 +307,11 @@ pub struct TrainArgs {
     /// Largest spherical-harmonics degree, 0 to 3. Default 3.
     #[arg(long = "sh-degree")]
     pub sh_degree: Option<u64>,
+    /// What photos with an alpha channel are composited over, and what the Gaussians render
+    /// over: black, white or R,G,B in 0..1 (e.g. white for NeRF-synthetic's RGBA renders).
+    /// Render and eval the result with the same --background. Default black.
+    #[arg(long)]
+    pub background: Option<String>,
     /// Composite each training render over a random colour, which keeps floaters from
     /// hiding behind a matching background.
     #[arg(long = "random-background")]
@@ -473,7 +478,8 @@ pub struct RenderArgs {
     /// Render at the views' size divided by N (use the training --downscale to compare).
     #[arg(long)]
     pub downscale: Option<u32>,
-    /// Background colour R,G,B in 0..1. Default 0,0,0 (what training composites over).
+    /// Background colour: black, white or R,G,B in 0..1; use the training --background.
+    /// Default black.
     #[arg(long)]
     pub background: Option<String>,
     /// Only these views: comma-separated names or stems (e.g. 000,008). Default: the split.

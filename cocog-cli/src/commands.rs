@@ -119,6 +119,7 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
                 "coc_head_init" => a.coc_head_init,
                 "sh_degree" => a.sh_degree,
                 "random_background" => a.random_background.then_some(true),
+                "background" => a.background.clone(),
                 "resume" => a.resume.as_ref().map(|p| p.display().to_string()),
                 "checkpoint_every" => a.checkpoint_every,
                 "checkpoint_dir" => Some(beside(".checkpoint")),

@@ -23,7 +23,7 @@ pub mod testing;
 mod travel;
 
 pub use context::{Context, LogLevel, NullContext};
-pub use options::{OptionKind, OptionSpec, Options};
+pub use options::{OptionKind, OptionSpec, Options, parse_colour};
 pub use registry::{Provider, Registry, StageEntry};
 pub use scene::{Bounds, Camera, HistoryEntry, Lens, Scene, SceneError, Split, View};
 pub use stage::{OutputKind, Stage, StageError, StageInfo, StageKind, StageRequest};

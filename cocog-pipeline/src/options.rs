@@ -12,6 +12,29 @@ use serde_json::{Map, Value};
 
 use crate::stage::StageError;
 
+/// A colour option: `black`, `white` or `R,G,B` in 0..1; the error names `option`.
+pub fn parse_colour(option: &str, text: &str) -> Result<[f32; 3], StageError> {
+    match text.trim() {
+        "black" => return Ok([0.0; 3]),
+        "white" => return Ok([1.0; 3]),
+        _ => {}
+    }
+    let bad = || {
+        StageError::Options(format!(
+            "option '{option}': expected black, white or three numbers in 0..1 like \
+             \"0.5,0.5,0.5\", got {text:?}"
+        ))
+    };
+    let parts: Vec<f32> = text
+        .split(',')
+        .map(|s| s.trim().parse::<f32>().map_err(|_| bad()))
+        .collect::<Result<_, _>>()?;
+    match parts[..] {
+        [r, g, b] if parts.iter().all(|v| (0.0..=1.0).contains(v)) => Ok([r, g, b]),
+        _ => Err(bad()),
+    }
+}
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum OptionKind {
@@ -281,5 +304,22 @@ mod tests {
         let s = vec![OptionSpec::float("scale", 1.0, "")];
         let o = Options::validate("s", &s, &map(json!({"scale": 2}))).expect("valid");
         assert_eq!(o.get_f64("scale"), Some(2.0));
+    }
+
+    #[test]
+    fn colours_parse_by_name_or_numbers_and_say_what_is_expected() {
+        assert_eq!(parse_colour("background", "white").unwrap(), [1.0; 3]);
+        assert_eq!(parse_colour("background", "black").unwrap(), [0.0; 3]);
+        assert_eq!(
+            parse_colour("background", " 0.5, 0, 1").unwrap(),
+            [0.5, 0.0, 1.0]
+        );
+        for bad in ["grey", "1,1", "0,0,2", "a,b,c", ""] {
+            let e = parse_colour("background", bad).unwrap_err().to_string();
+            assert!(
+                e.contains("'background'") && e.contains("black, white"),
+                "{bad}: {e}"
+            );
+        }
     }
 }

@@ -61,19 +61,7 @@ pub(crate) fn downscale(req: &StageRequest, stage: &str) -> Result<u32, StageErr
 }
 
 fn parse_background(text: &str) -> Result<[f32; 3], StageError> {
-    let bad = || {
-        StageError::Options(format!(
-            "option 'background': expected three numbers in 0..1 like \"0,0,0\", got {text:?}"
-        ))
-    };
-    let parts: Vec<f32> = text
-        .split(',')
-        .map(|s| s.trim().parse::<f32>().map_err(|_| bad()))
-        .collect::<Result<_, _>>()?;
-    match parts[..] {
-        [r, g, b] if parts.iter().all(|v| (0.0..=1.0).contains(v)) => Ok([r, g, b]),
-        _ => Err(bad()),
-    }
+    cocog_pipeline::parse_colour("background", text)
 }
 
 /// 8-bit RGB, clamped and rounded: the values are trained as stored, so no transfer curve.
@@ -399,7 +387,11 @@ impl Stage for Render {
                 split_option(),
                 downscale_option(),
                 OptionSpec::bool("depth", false, "also write depth maps as EXR"),
-                OptionSpec::string("background", "0,0,0", "background colour r,g,b in 0..1"),
+                OptionSpec::string(
+                    "background",
+                    "0,0,0",
+                    "background colour: black, white or r,g,b in 0..1 (use the training one)",
+                ),
                 OptionSpec::optional(
                     "views",
                     OptionKind::String,

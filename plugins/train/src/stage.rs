@@ -93,6 +93,12 @@ fn options() -> Vec<OptionSpec> {
             "cocog: CoC Gaussians M per base Gaussian; 0 = the variant's (code 4, paper 5)",
         ),
         OptionSpec::int("sh_degree", 3, "largest spherical-harmonics degree, 0 to 3"),
+        OptionSpec::string(
+            "background",
+            "0,0,0",
+            "black, white or r,g,b in 0..1: what photos with alpha are composited over and \
+             what the Gaussians render over (render and eval with the same --background)",
+        ),
         OptionSpec::bool(
             "random_background",
             false,
@@ -237,6 +243,10 @@ fn plan(req: &StageRequest) -> Result<Plan, StageError> {
             seed: int(req, "seed", 0, i64::MAX)? as u64,
             loss_every: log_interval(iterations),
             random_background: req.options.get_bool("random_background").unwrap_or(false),
+            background: cocog_pipeline::parse_colour(
+                "background",
+                req.options.get_str("background").unwrap_or("0,0,0"),
+            )?,
             coc,
             ..TrainConfig::default()
         },
@@ -433,7 +443,8 @@ impl Stage for Train {
             "method": if plan.config.coc.is_some() { "cocog" } else { "3dgs" },
             "learned_focus_distances": focus,
             "learned_apertures": apertures,
-            "resolved": { "schedule": schedule, "coc": plan.config.coc.as_ref().map(|c| json!({
+            "resolved": { "schedule": schedule, "background": plan.config.background,
+                "coc": plan.config.coc.as_ref().map(|c| json!({
                 "variant": c.net.variant.name(),
                 "copies": c.net.copies,
                 "centred": c.net.centred,

@@ -113,6 +113,29 @@ fn train_stage_writes_gaussians_log_and_scene() {
     let points = PathBuf::from(after.points.unwrap());
     assert!(points.is_absolute() && points.exists(), "{points:?}");
 
+    assert_eq!(summary["resolved"]["background"], json!([0.0, 0.0, 0.0]));
+
+    // Photos with alpha are composited over the chosen background (white here), which the
+    // history records; an unknown colour is refused naming the option.
+    let white = tmp.path().join("white");
+    let summary = run(
+        train.as_ref(),
+        &scene_dir,
+        &white,
+        json!({"iterations": 5, "downscale": 2, "sh_degree": 0, "background": "white"}),
+    )
+    .unwrap();
+    assert_eq!(summary["resolved"]["background"], json!([1.0, 1.0, 1.0]));
+    let err = run(
+        train.as_ref(),
+        &scene_dir,
+        &tmp.path().join("grey"),
+        json!({"background": "grey"}),
+    )
+    .unwrap_err();
+    assert!(matches!(err, StageError::Options(_)), "{err:?}");
+    assert!(err.to_string().contains("'background'"), "{err}");
+
     // Half resolution trains too, and its scratch PNGs do not end up in the output.
     let half = tmp.path().join("half");
     let summary = run(
