@@ -641,6 +641,9 @@ pub struct BenchArgs {
     /// cocog: hidden channels of F. Default 64.
     #[arg(long = "compositor-channels", default_value_t = 64)]
     pub compositor_channels: u32,
+    /// cocog: centred CoC copies (as `train --coc-centred`; a --resume of such a run needs it).
+    #[arg(long = "coc-centred")]
+    pub coc_centred: bool,
     /// Also time every GPU kernel (timestamp queries) over the profiled iterations.
     #[arg(long)]
     pub kernels: bool,

@@ -252,6 +252,7 @@ fn bench(a: &crate::cli::BenchArgs, g: &Global, ctx: &dyn Context) -> Result<()>
                     .into());
                 }
                 c.net.copies = copies;
+                c.net.centred = a.coc_centred;
                 c.compositor_channels = a.compositor_channels;
                 Some(c)
             }
