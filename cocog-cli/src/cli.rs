@@ -309,7 +309,7 @@ pub struct TrainArgs {
     pub sh_degree: Option<u64>,
     /// What photos with an alpha channel are composited over, and what the Gaussians render
     /// over: black, white or R,G,B in 0..1 (e.g. white for NeRF-synthetic's RGBA renders).
-    /// Render and eval the result with the same --background. Default black.
+    /// Render and eval use it too (it is recorded in scene.json). Default black.
     #[arg(long)]
     pub background: Option<String>,
     /// Composite each training render over a random colour, which keeps floaters from
@@ -478,8 +478,8 @@ pub struct RenderArgs {
     /// Render at the views' size divided by N (use the training --downscale to compare).
     #[arg(long)]
     pub downscale: Option<u32>,
-    /// Background colour: black, white or R,G,B in 0..1; use the training --background.
-    /// Default black.
+    /// Background colour: black, white or R,G,B in 0..1. Default: the one the scene was
+    /// trained over (train --background).
     #[arg(long)]
     pub background: Option<String>,
     /// Only these views: comma-separated names or stems (e.g. 000,008). Default: the split.

@@ -215,6 +215,18 @@ impl Scene {
         Ok(())
     }
 
+    /// The colour the last training run composited photos over and rendered its Gaussians
+    /// over (train's resolved `background`), which renders and scores must reuse.
+    pub fn trained_background(&self) -> Option<[f32; 3]> {
+        let entry = self.history.iter().rev().find(|h| h.stage == "train")?;
+        let rgb = entry.resolved.as_ref()?.get("background")?.as_array()?;
+        let rgb: Vec<f32> = rgb
+            .iter()
+            .filter_map(|v| Some(v.as_f64()? as f32))
+            .collect();
+        <[f32; 3]>::try_from(rgb).ok()
+    }
+
     pub fn camera(&self, id: u32) -> Option<&Camera> {
         self.cameras.iter().find(|c| c.id == id)
     }

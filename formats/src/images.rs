@@ -129,11 +129,37 @@ fn area_downscale(img: &Rgba32FImage, factor: u32) -> Rgba32FImage {
 /// Writes `src` shrunk by `factor` to `dst` as PNG, keeping its bit depth (8 or 16) and whether
 /// it has colour and alpha. Atomic.
 pub fn write_downscaled(src: &Path, dst: &Path, factor: u32) -> Result<(u32, u32)> {
+    write_downscaled_over(src, dst, factor, None)
+}
+
+/// [`write_downscaled`], with a photo's alpha composited over `background` (0..1 in the
+/// photo's own encoding, as the trainer's loader does) and dropped when one is given: scores must compare a render
+/// over that colour with the photo over it.
+pub fn write_downscaled_over(
+    src: &Path,
+    dst: &Path,
+    factor: u32,
+    background: Option<[f32; 3]>,
+) -> Result<(u32, u32)> {
     let img = decode(src)?;
     let color = img.color();
-    let small = DynamicImage::ImageRgba32F(area_downscale(&img.to_rgba32f(), factor));
+    let mut small = area_downscale(&img.to_rgba32f(), factor);
+    let alpha = match background {
+        Some(bg) if color.has_alpha() => {
+            for p in small.pixels_mut() {
+                let a = p.0[3];
+                for c in 0..3 {
+                    p.0[c] = p.0[c] * a + bg[c] * (1.0 - a);
+                }
+                p.0[3] = 1.0;
+            }
+            false
+        }
+        _ => color.has_alpha(),
+    };
+    let small = DynamicImage::ImageRgba32F(small);
     let sixteen = color.bytes_per_pixel() / color.channel_count() > 1;
-    let out = match (sixteen, color.has_color(), color.has_alpha()) {
+    let out = match (sixteen, color.has_color(), alpha) {
         (false, true, true) => DynamicImage::ImageRgba8(small.to_rgba8()),
         (false, true, false) => DynamicImage::ImageRgb8(small.to_rgb8()),
         (false, false, true) => DynamicImage::ImageLumaA8(small.to_luma_alpha8()),

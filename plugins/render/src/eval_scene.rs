@@ -4,11 +4,13 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use cocog_eval::{CtxObserver, eval_options, metric_options, stage_error};
-use cocog_formats::images::write_downscaled;
+use cocog_formats::images::write_downscaled_over;
 use cocog_pipeline::{Context, OutputKind, Stage, StageError, StageInfo, StageKind, StageRequest};
 use serde_json::{Value, json};
 
-use crate::render_stage::{RenderJob, downscale, downscale_option, render_views, split_option};
+use crate::render_stage::{
+    RenderJob, downscale, downscale_option, render_views, split_option, trained_background,
+};
 use crate::{parse_split, split_cameras};
 
 pub struct EvalScene;
@@ -29,7 +31,7 @@ fn ground_truth(
         ctx.progress("ground truth", i as u64, views.len() as u64);
         // write_downscaled always encodes PNG (lossless, even for a JPEG photo at factor 1).
         let dst = out.join(format!("{}.png", view.stem()));
-        let (w, h) = write_downscaled(&view.image, &dst, job.downscale)
+        let (w, h) = write_downscaled_over(&view.image, &dst, job.downscale, Some(job.background))
             .map_err(|e| StageError::Input(format!("view {:?}: {e}", view.name)))?;
         if (w, h) != (view.camera.width, view.camera.height) {
             return Err(StageError::Input(format!(
@@ -88,7 +90,8 @@ impl Stage for EvalScene {
         let job = RenderJob {
             split: parse_split(&split_name)?,
             downscale: downscale(req, "eval-scene")?,
-            background: [0.0; 3],
+            // Over the training colour, with the photos' alpha composited over it too.
+            background: trained_background(&req.input),
             depth: false,
             views: Vec::new(),
             refocus: None,

@@ -60,6 +60,15 @@ pub(crate) fn downscale(req: &StageRequest, stage: &str) -> Result<u32, StageErr
         })
 }
 
+/// What the scene was trained over; black when unrecorded (a bad scene.json is reported by
+/// the render itself, with its path).
+pub(crate) fn trained_background(scene_dir: &Path) -> [f32; 3] {
+    cocog_pipeline::Scene::load(scene_dir)
+        .ok()
+        .and_then(|s| s.trained_background())
+        .unwrap_or([0.0; 3])
+}
+
 fn parse_background(text: &str) -> Result<[f32; 3], StageError> {
     cocog_pipeline::parse_colour("background", text)
 }
@@ -387,10 +396,11 @@ impl Stage for Render {
                 split_option(),
                 downscale_option(),
                 OptionSpec::bool("depth", false, "also write depth maps as EXR"),
-                OptionSpec::string(
+                OptionSpec::optional(
                     "background",
-                    "0,0,0",
-                    "background colour: black, white or r,g,b in 0..1 (use the training one)",
+                    OptionKind::String,
+                    "background colour: black, white or r,g,b in 0..1 (default: the one the \
+                     scene was trained over, black for scenes from before it was recorded)",
                 ),
                 OptionSpec::optional(
                     "views",
@@ -457,7 +467,10 @@ impl Stage for Render {
         let job = RenderJob {
             split: parse_split(o.get_str("split").unwrap_or("test"))?,
             downscale: downscale(req, "render")?,
-            background: parse_background(o.get_str("background").unwrap_or("0,0,0"))?,
+            background: match o.get_str("background") {
+                Some(text) => parse_background(text)?,
+                None => trained_background(&req.input),
+            },
             depth: o.get_bool("depth").unwrap_or(false),
             views,
             refocus: refocus_job(req)?,

@@ -92,3 +92,68 @@ fn perturbed_photos_score_what_eval_scores_on_the_renders() {
     }
     assert_eq!(report["images"][0]["name"], "a");
 }
+
+/// Photos with alpha are scored over the colour the scene was trained over, and renders
+/// default to it: the photo is the f64 reference render's colour and coverage as straight
+/// RGBA, so over white it must equal the reference rendered over white.
+#[test]
+fn alpha_photos_are_scored_over_the_training_background() {
+    if !gpu_available() {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = tmp.path().join("scene");
+    let (exact, _) = reference_png();
+    write_scene(&scene, &exact);
+    let over_black = common::reference_render([0.0; 3]);
+    let straight = image::RgbaImage::from_fn(over_black.width, over_black.height, |x, y| {
+        let i = (y * over_black.width + x) as usize;
+        let a = over_black.alpha[i];
+        let q = |v: f64| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+        let c = over_black.color[i].map(|c| if a > 1e-9 { q(c / a) } else { 0 });
+        image::Rgba([c[0], c[1], c[2], q(a)])
+    });
+    assert!(
+        over_black.alpha.iter().any(|&a| a < 0.5),
+        "the test needs uncovered pixels"
+    );
+    straight.save(scene.join("images/a.png")).unwrap();
+    let mut manifest = cocog_pipeline::Scene::load(&scene).unwrap();
+    manifest.history.push(cocog_pipeline::HistoryEntry {
+        stage: "train".into(),
+        provider: "built-in".into(),
+        input: "elsewhere".into(),
+        options: json!({}),
+        resolved: Some(json!({ "background": [1.0, 1.0, 1.0] })),
+        cocog_version: "test".into(),
+        finished_at: 0,
+    });
+    manifest.save(&scene).unwrap();
+    assert_eq!(manifest.trained_background(), Some([1.0; 3]));
+
+    let report = run(
+        stage("eval-scene").as_ref(),
+        &scene,
+        &tmp.path().join("metrics.json"),
+        json!({"lpips": "off"}),
+    )
+    .unwrap();
+    eprintln!("eval-scene of RGBA photos over white: {}", report["mean"]);
+    assert!(psnr(&report) > 40.0, "{}", report["mean"]);
+
+    // render defaults to the training colour too: uncovered pixels come out white.
+    let renders = tmp.path().join("renders");
+    std::fs::create_dir(&renders).unwrap();
+    run(stage("render").as_ref(), &scene, &renders, json!({})).unwrap();
+    let img = image::open(renders.join("a.png")).unwrap().to_rgb8();
+    let over_white = common::reference_render([1.0; 3]);
+    for (i, p) in img.pixels().enumerate() {
+        let want = over_white.color[i].map(|c| c.clamp(0.0, 1.0) * 255.0);
+        for c in 0..3 {
+            assert!(
+                (f64::from(p.0[c]) - want[c]).abs() <= 2.0,
+                "pixel {i}: {p:?} vs {want:?}"
+            );
+        }
+    }
+}

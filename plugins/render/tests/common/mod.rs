@@ -130,9 +130,14 @@ pub fn stage(name: &str) -> Box<dyn Stage> {
         .unwrap()
 }
 
+/// The f64 reference render of the test Gaussians over `background`.
+pub fn reference_render(background: [f64; 3]) -> Image64 {
+    render(&Gaussians64::from(&gaussians()), &camera(), background)
+}
+
 /// The f64 reference image quantised as the stage quantises.
 pub fn reference_png() -> (image::RgbImage, Image64) {
-    let img = render(&Gaussians64::from(&gaussians()), &camera(), [0.0; 3]);
+    let img = reference_render([0.0; 3]);
     let bytes = img
         .color
         .iter()
