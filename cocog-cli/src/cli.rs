@@ -43,6 +43,11 @@ pub struct Global {
     /// Replace the output if it already exists.
     #[arg(long, global = true)]
     pub force: bool,
+    /// Make a scene output self-contained: its photos (and depth maps) are hard-linked or
+    /// copied into it (images/, depth/) instead of referenced where they are. Model files
+    /// (points, Gaussians, lens model) are always carried along.
+    #[arg(long = "copy-images", global = true)]
+    pub copy_images: bool,
     /// Print the stage's result as JSON on stdout instead of the output path (its `output`
     /// field names the path).
     #[arg(long, global = true)]

@@ -6,7 +6,7 @@ use std::path::Path;
 use anyhow::{Context as _, Result};
 use cocog_pipeline::pipeline::{RunMode, run_pipeline};
 use cocog_pipeline::plugin::plugin_dirs;
-use cocog_pipeline::runner::run_stage;
+use cocog_pipeline::runner::{RunHow, run_stage, run_stage_with};
 use cocog_pipeline::{Context, Registry, StageEntry};
 use serde_json::{Map, Value};
 
@@ -203,6 +203,7 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
             let mode = RunMode {
                 force: g.force,
                 resume: a.resume,
+                copy_images: g.copy_images,
             };
             let summary = match run_pipeline(&registry, &a.pipeline, mode, ctx) {
                 Ok(s) => s,
@@ -305,7 +306,11 @@ pub fn run_named(
     ctx: &dyn Context,
 ) -> Result<()> {
     let entry = resolve(registry, name)?;
-    let summary = run_stage(entry, input, output, options, g.force, ctx)?;
+    let how = RunHow {
+        force: g.force,
+        copy_images: g.copy_images,
+    };
+    let summary = run_stage_with(entry, input, output, options, &how, ctx)?;
     print_result(g, &summary, output)
 }
 

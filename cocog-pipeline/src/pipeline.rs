@@ -8,7 +8,7 @@ use serde_json::{Map, Value, json};
 use crate::context::Context;
 use crate::options::Options;
 use crate::registry::{Registry, StageEntry};
-use crate::runner::{RunError, run_stage};
+use crate::runner::{RunError, RunHow, run_stage_with};
 use crate::scene::Scene;
 use crate::stage::{OutputKind, StageKind};
 
@@ -46,6 +46,8 @@ pub struct RunMode {
     /// Keep stages whose output exists with the same options and input, and continue an
     /// interrupted training stage from its checkpoint.
     pub resume: bool,
+    /// Make every scene output self-contained (photos copied in).
+    pub copy_images: bool,
 }
 
 /// One stage of the chain, with everything checked before anything runs.
@@ -179,8 +181,11 @@ pub fn run_pipeline(
         }
         ctx.info(&format!("{progress} -> {}", step.output.display()));
         // Under --resume an existing output is an earlier attempt's: cocog's to replace.
-        let force = mode.force || mode.resume;
-        let summary = run_stage(step.entry, &input, &step.output, &step.options, force, ctx)?;
+        let how = RunHow {
+            force: mode.force || mode.resume,
+            copy_images: mode.copy_images,
+        };
+        let summary = run_stage_with(step.entry, &input, &step.output, &step.options, &how, ctx)?;
         done.push(json!({ "stage": step.name, "output": step.output, "summary": summary }));
         input = step.output;
     }

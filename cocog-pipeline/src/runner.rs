@@ -76,6 +76,32 @@ pub fn run_stage(
     force: bool,
     ctx: &dyn Context,
 ) -> Result<Value, RunError> {
+    let how = RunHow {
+        force,
+        ..RunHow::default()
+    };
+    run_stage_with(entry, input, output, given, &how, ctx)
+}
+
+/// How the runner treats a stage's output, beyond the stage's own options.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RunHow {
+    /// Replace an existing output.
+    pub force: bool,
+    /// Copy (or hard-link) the photos into a scene output, so it is self-contained.
+    pub copy_images: bool,
+}
+
+/// [`run_stage`] with every runner setting.
+pub fn run_stage_with(
+    entry: &StageEntry,
+    input: &Path,
+    output: &Path,
+    given: &Map<String, Value>,
+    how: &RunHow,
+    ctx: &dyn Context,
+) -> Result<Value, RunError> {
+    let force = how.force;
     let name = entry.info.name.clone();
     let stage_err = |source| RunError::Stage {
         stage: name.clone(),
@@ -146,7 +172,7 @@ pub fn run_stage(
         })?;
     }
     if entry.info.output == OutputKind::Dir && staging.path().join(MANIFEST).exists() {
-        crate::travel::take_along(staging.path())?;
+        crate::travel::take_along(staging.path(), how.copy_images)?;
         record_history(
             staging.path(),
             entry,

@@ -7,7 +7,7 @@ use std::sync::Arc;
 use serde_json::{Map, Value, json};
 
 use crate::registry::{Provider, StageEntry};
-use crate::runner::run_stage;
+use crate::runner::{RunHow, run_stage, run_stage_with};
 use crate::stage::{OutputKind, StageInfo, StageKind};
 use crate::testing::one_view_scene;
 use crate::{Context, NullContext, OptionSpec, Scene, Stage, StageError, StageRequest};
@@ -202,4 +202,55 @@ fn a_scene_output_carries_its_model_files_and_outlives_its_input() {
     );
     assert!(Path::new(&s.views[0].image).is_absolute());
     assert_eq!(std::fs::read_to_string(&s.views[0].image).unwrap(), "photo");
+}
+
+#[test]
+fn copy_images_makes_a_scene_self_contained() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (input, other) = (tmp.path().join("in"), tmp.path().join("other"));
+    std::fs::create_dir(&input).unwrap();
+    std::fs::create_dir(&other).unwrap();
+    // Two views whose photos share a file name in different folders, one with depth, one
+    // photo used twice.
+    let mut scene = one_view_scene();
+    let mut b = scene.views[0].clone();
+    b.name = "b".into();
+    b.image = other.join("a.png").display().to_string();
+    b.depth = Some("d.exr".into());
+    let mut c = scene.views[0].clone();
+    c.name = "c".into();
+    scene.views.extend([b, c]);
+    scene.save(&input).unwrap();
+    std::fs::write(input.join("a.png"), "photo a").unwrap();
+    std::fs::write(other.join("a.png"), "photo b").unwrap();
+    std::fs::write(input.join("d.exr"), "depth b").unwrap();
+    let stage: Arc<dyn Stage> = Arc::new(Rebasing);
+    let entry = StageEntry {
+        info: stage.info(),
+        stage,
+        provider: Provider::BuiltIn,
+    };
+    let out = tmp.path().join("out");
+    let how = RunHow {
+        copy_images: true,
+        ..RunHow::default()
+    };
+    run_stage_with(&entry, &input, &out, &Map::new(), &how, &NullContext).unwrap();
+    std::fs::remove_dir_all(&input).unwrap();
+    std::fs::remove_dir_all(&other).unwrap();
+    let s = Scene::load(&out).unwrap();
+    let read = |stored: &str| {
+        assert!(!Path::new(stored).is_absolute(), "{stored}");
+        std::fs::read_to_string(out.join(stored)).unwrap()
+    };
+    assert_eq!(read(&s.views[0].image), "photo a");
+    assert_eq!(read(&s.views[1].image), "photo b");
+    assert_eq!(read(s.views[1].depth.as_deref().unwrap()), "depth b");
+    assert_eq!(s.views[2].image, s.views[0].image, "one copy per photo");
+    assert_ne!(s.views[0].image, s.views[1].image);
+    assert!(
+        s.views[0].image.starts_with("images/"),
+        "{}",
+        s.views[0].image
+    );
 }
