@@ -148,8 +148,8 @@ pub fn write_downscaled_over(
         Some(bg) if color.has_alpha() => {
             for p in small.pixels_mut() {
                 let a = p.0[3];
-                for c in 0..3 {
-                    p.0[c] = p.0[c] * a + bg[c] * (1.0 - a);
+                for (v, b) in p.0.iter_mut().zip(bg) {
+                    *v = *v * a + b * (1.0 - a);
                 }
                 p.0[3] = 1.0;
             }
