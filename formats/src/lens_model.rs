@@ -26,6 +26,9 @@ pub struct LensModel {
     pub modulate_base: bool,
     /// Hidden channels of F.
     pub compositor_channels: u32,
+    /// Whether training reached F's start, so its weights are learned; renders average the
+    /// CoC sets otherwise. Files from before it was recorded read as `true`.
+    pub compositor_trained: bool,
     pub mlp: Vec<f32>,
     pub compositor: Vec<f32>,
     /// The frame h_θ works in: positions from `origin`, lengths over `scale`.
@@ -84,6 +87,10 @@ impl LensModel {
             (
                 "compositor_channels".to_owned(),
                 self.compositor_channels.to_string(),
+            ),
+            (
+                "compositor_trained".to_owned(),
+                self.compositor_trained.to_string(),
             ),
         ]);
         let io = |source| LensModelError::Io {
@@ -151,6 +158,10 @@ impl LensModel {
         };
         let centred = flag("centred")?;
         let modulate_base = flag("modulate_base")?;
+        let compositor_trained = match meta.get("compositor_trained") {
+            Some(_) => flag("compositor_trained")?,
+            None => true,
+        };
         let origin = floats("origin")?;
         let scale = floats("scale")?;
         let (origin, scale) = match (&origin[..], &scale[..]) {
@@ -172,6 +183,7 @@ impl LensModel {
             centred,
             modulate_base,
             compositor_channels: number("compositor_channels")?,
+            compositor_trained,
             mlp: floats("mlp")?,
             compositor: floats("compositor")?,
             focus_distances: floats("focus_distances")?,
@@ -197,6 +209,7 @@ mod tests {
             centred: true,
             modulate_base: true,
             compositor_channels: 16,
+            compositor_trained: false,
             mlp: vec![0.5, -0.25, 1e-3],
             compositor: vec![2.0; 5],
             origin: [0.1, 0.2, -0.3],

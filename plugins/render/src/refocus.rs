@@ -30,7 +30,8 @@ pub struct RefocusJob {
     pub focus: FocusChoice,
     /// Multiplies the learned circles of confusion (1 as photographed, 0 sharp).
     pub aperture: f64,
-    pub composite: CompositeMode,
+    /// `None`: F where training learned it, else the mean of the sets.
+    pub composite: Option<CompositeMode>,
 }
 
 /// A scene's lens model, loaded and checked against the scene.
@@ -176,12 +177,20 @@ impl LensScene {
         Ok((img, lens))
     }
 
+    fn composite(&self, job: &RefocusJob) -> CompositeMode {
+        job.composite.unwrap_or(if self.model.compositor_trained {
+            CompositeMode::Learned
+        } else {
+            CompositeMode::Uniform
+        })
+    }
+
     fn photo_lens(&self, k: usize, job: &RefocusJob) -> Lens {
         Lens {
             focus_distance: self.model.focus_distances[k],
             aperture: job.aperture as f32,
             learned_aperture: self.model.apertures.get(k).copied().unwrap_or(0.0),
-            composite: job.composite,
+            composite: self.composite(job),
         }
     }
 
@@ -190,7 +199,7 @@ impl LensScene {
             focus_distance: distance as f32,
             aperture: job.aperture as f32,
             learned_aperture: self.typical_aperture(),
-            composite: job.composite,
+            composite: self.composite(job),
         }
     }
 }

@@ -296,10 +296,7 @@ fn sweep_job(mut job: RenderJob, text: &str) -> Result<RenderJob, StageError> {
     job.refocus = Some(RefocusJob {
         focus: FocusChoice::Distance(job.sweep[0]),
         aperture: job.refocus.as_ref().map_or(1.0, |r| r.aperture),
-        composite: job
-            .refocus
-            .as_ref()
-            .map_or(CompositeMode::Learned, |r| r.composite),
+        composite: job.refocus.as_ref().and_then(|r| r.composite),
     });
     Ok(job)
 }
@@ -367,10 +364,11 @@ fn refocus_job(req: &StageRequest) -> Result<Option<RefocusJob>, StageError> {
             y.trim().parse().map_err(|_| bad())?,
         )
     };
-    let composite = match o.get_str("composite").unwrap_or("learned") {
-        "learned" => CompositeMode::Learned,
-        "mean" => CompositeMode::Uniform,
-        other => {
+    let composite = match o.get_str("composite") {
+        None => None,
+        Some("learned") => Some(CompositeMode::Learned),
+        Some("mean") => Some(CompositeMode::Uniform),
+        Some(other) => {
             return Err(StageError::Options(format!(
                 "option 'composite': expected learned or mean, got {other:?}"
             )));
@@ -438,10 +436,12 @@ impl Stage for Render {
                     "refocus: multiplies the learned aperture (1 = as photographed, 0 = sharp, \
                      2 = twice the blur)",
                 ),
-                OptionSpec::string(
+                OptionSpec::optional(
                     "composite",
-                    "learned",
-                    "refocus: blend the CoC renders with the learned compositor F, or their mean",
+                    OptionKind::String,
+                    "refocus: blend the CoC renders with the learned compositor F (learned) or \
+                     take their mean (mean); default: F when training reached its start, else \
+                     the mean",
                 ),
                 OptionSpec::optional(
                     "focus_sweep",

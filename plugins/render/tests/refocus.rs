@@ -27,6 +27,7 @@ fn lens_model(variant: CocVariant) -> LensModel {
         centred: true,
         modulate_base: true,
         compositor_channels: channels,
+        compositor_trained: true,
         mlp: init_weights(&config.mlp(), 5),
         compositor: CompositorConfig::with_channels(channels).layout().init(6),
         origin: [0.0, 0.0, 0.0],
@@ -99,6 +100,28 @@ fn aperture_zero_is_the_sharp_render_and_a_lens_blurs() {
             differ > x.len() / 10,
             "{variant:?}: a wide aperture must change the render ({differ} of {} bytes)",
             x.len()
+        );
+        // The default blend is F when training learned it (this model says so), and the mean
+        // of the sets when training never reached F's start.
+        let mean = tmp.path().join("mean");
+        let wide_mean =
+            json!({"views": "a", "focus_distance": "2.5", "aperture": 3.0, "composite": "mean"});
+        render(&scene, &mean, wide_mean).unwrap();
+        let m = png(&mean.join("a.png"));
+        assert_ne!(
+            m, y,
+            "{variant:?}: F and the mean must blend differently here"
+        );
+        let mut model = lens_model(variant);
+        model.compositor_trained = false;
+        model.save(&scene.join("lens-model.safetensors")).unwrap();
+        let untrained = tmp.path().join("untrained");
+        let wide_default = json!({"views": "a", "focus_distance": "2.5", "aperture": 3.0});
+        render(&scene, &untrained, wide_default).unwrap();
+        assert_eq!(
+            png(&untrained.join("a.png")),
+            m,
+            "{variant:?}: untrained F is not used"
         );
     }
 }

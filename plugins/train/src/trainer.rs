@@ -319,6 +319,16 @@ impl<'c> Trainer<'c> {
         self.scene_scale
     }
 
+    /// Whether step `it` changes the Gaussian set instead of training it (densification,
+    /// point addition, opacity reset): such a step makes no optimizer update, so the model
+    /// worth scoring "at" `it` is the one before it, as INRIA's test report sees it.
+    pub fn restructures_at(&self, it: u32) -> bool {
+        self.config
+            .densify
+            .as_ref()
+            .is_some_and(|d| d.densifies_at(it) || d.adds_points_at(it) || d.resets_opacity_at(it))
+    }
+
     /// Iterations completed.
     pub fn iteration(&self) -> u32 {
         self.iteration
@@ -374,7 +384,11 @@ impl<'c> Trainer<'c> {
     /// CoCoGaussian's lens model for refocused renders (`None` for plain 3DGS).
     pub fn lens_model(&self) -> Result<Option<cocog_formats::lens_model::LensModel>, TrainError> {
         match &self.coc {
-            Some(c) => Ok(Some(c.lens_model(self.ctx, self.cameras.len())?)),
+            Some(c) => Ok(Some(c.lens_model(
+                self.ctx,
+                self.cameras.len(),
+                self.iteration,
+            )?)),
             None => Ok(None),
         }
     }

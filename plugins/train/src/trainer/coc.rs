@@ -158,6 +158,7 @@ impl CocState {
         &self,
         ctx: &GpuContext,
         views: usize,
+        iteration: u32,
     ) -> Result<cocog_formats::lens_model::LensModel, TrainError> {
         let net = &self.config.net;
         let (frame, apertures) = match &self.focus {
@@ -174,6 +175,7 @@ impl CocState {
             centred: net.centred,
             modulate_base: net.modulate_base,
             compositor_channels: self.config.compositor_channels,
+            compositor_trained: self.config.composites_at(iteration),
             mlp: ctx.read(&self.weights, net.mlp().len)?,
             compositor: ctx.read(&self.f_params, self.compositor.layout().len)?,
             focus_distances: self
