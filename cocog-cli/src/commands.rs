@@ -117,6 +117,7 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
                 "coc_centred" => a.coc_centred.then_some(true),
                 "coc_modulate_base" => a.coc_sharp_base.then_some(false),
                 "coc_head_init" => a.coc_head_init,
+                "kernel_lr" => a.kernel_lr,
                 "sh_degree" => a.sh_degree,
                 "random_background" => a.random_background.then_some(true),
                 "background" => a.background.clone(),

@@ -66,6 +66,12 @@ fn options() -> Vec<OptionSpec> {
              (test views render the base unmodulated)",
         ),
         OptionSpec::float(
+            "kernel_lr",
+            1e-3,
+            "cocog: initial learning rate of h_θ, F and the focus distances, decaying 100× \
+             over the run (1e-3 in both sources; short runs learn the lens faster with more)",
+        ),
+        OptionSpec::float(
             "coc_head_init",
             1.0,
             "cocog: scale of h_θ's initial head weights (1 = PyTorch's default, as both sources; \
@@ -204,6 +210,14 @@ fn coc_config(req: &StageRequest, iterations: u32) -> Result<Option<CocTrainConf
         )));
     }
     c.head_init_scale = head_init as f32;
+    let lr = req.options.get_f64("kernel_lr").unwrap_or(1e-3);
+    if !(lr > 0.0 && lr <= 1.0) {
+        return Err(StageError::Options(format!(
+            "stage 'train' option 'kernel_lr' must be in (0, 1], got {lr}"
+        )));
+    }
+    c.kernel_lr_final *= lr / c.kernel_lr_init;
+    c.kernel_lr_init = lr;
     if c.blur_start > iterations {
         return Err(StageError::Options(format!(
             "stage 'train': blur_start {} is past the last iteration ({iterations}): the run \
