@@ -20,56 +20,75 @@ struct Row {
     true_aperture: Option<f64>,
 }
 
-pub fn run(a: &LensArgs, g: &Global) -> Result<()> {
-    let dir = &a.scene;
-    let mut scene = Scene::load(dir).with_context(|| format!("{}", dir.display()))?;
-    scene.rebase(dir)?;
-    let learned: Vec<_> = scene
-        .views
-        .iter()
-        .filter(|v| v.split == Split::Train)
-        .filter_map(|v| v.lens.as_ref().map(|l| (v, l)))
-        .collect();
-    if learned.is_empty() {
-        bail!(
-            "{}: no training photo has a learned lens; train with --method cocog (past \
-             --blur-start) to learn one",
-            dir.display()
-        );
-    }
-    let truth = a
-        .truth
-        .clone()
-        .or_else(|| find_transforms(&Scene::resolve(dir, &learned[0].0.image)));
-    let known = match &truth {
-        Some(path) => read_truth(path)?,
-        None => HashMap::new(),
-    };
-    let rows: Vec<Row> = learned
-        .iter()
-        .map(|(v, l)| {
-            let t = known.get(&v.name);
-            Row {
-                name: v.name.clone(),
-                focus: l.focus_distance,
-                aperture: l.aperture,
-                true_focus: t.and_then(|t| t.0),
-                true_aperture: t.and_then(|t| t.1),
-            }
+/// Every training photo's learned lens, beside the truth where the dataset has it.
+pub struct LensReport {
+    scene: PathBuf,
+    rows: Vec<Row>,
+    truth: Option<PathBuf>,
+    /// Median relative focus error over the photos with a known focus.
+    pub median: Option<f64>,
+}
+
+impl LensReport {
+    /// Reads the lenses of the scene in `dir`; `truth` overrides the transforms.json found
+    /// beside its photos.
+    pub fn read(dir: &Path, truth: Option<PathBuf>) -> Result<Self> {
+        let mut scene = Scene::load(dir).with_context(|| format!("{}", dir.display()))?;
+        scene.rebase(dir)?;
+        let learned: Vec<_> = scene
+            .views
+            .iter()
+            .filter(|v| v.split == Split::Train)
+            .filter_map(|v| v.lens.as_ref().map(|l| (v, l)))
+            .collect();
+        if learned.is_empty() {
+            bail!(
+                "{}: no training photo has a learned lens; train with --method cocog (past \
+                 --blur-start) to learn one",
+                dir.display()
+            );
+        }
+        let truth = truth.or_else(|| find_transforms(&Scene::resolve(dir, &learned[0].0.image)));
+        let known = match &truth {
+            Some(path) => read_truth(path)?,
+            None => HashMap::new(),
+        };
+        let rows: Vec<Row> = learned
+            .iter()
+            .map(|(v, l)| {
+                let t = known.get(&v.name);
+                Row {
+                    name: v.name.clone(),
+                    focus: l.focus_distance,
+                    aperture: l.aperture,
+                    true_focus: t.and_then(|t| t.0),
+                    true_aperture: t.and_then(|t| t.1),
+                }
+            })
+            .collect();
+        let mut errors: Vec<f64> = rows
+            .iter()
+            .filter_map(|r| r.true_focus.map(|t| rel(r.focus, t)))
+            .collect();
+        errors.sort_by(f64::total_cmp);
+        let median = (!errors.is_empty()).then(|| errors[errors.len() / 2]);
+        Ok(Self {
+            scene: dir.to_owned(),
+            rows,
+            truth,
+            median,
         })
-        .collect();
-    let rel = |a: f64, b: f64| (a - b).abs() / b;
-    let mut errors: Vec<f64> = rows
-        .iter()
-        .filter_map(|r| r.true_focus.map(|t| rel(r.focus, t)))
-        .collect();
-    errors.sort_by(f64::total_cmp);
-    let median = (!errors.is_empty()).then(|| errors[errors.len() / 2]);
-    if g.json {
-        let out = json!({
-            "scene": dir,
-            "truth": truth,
-            "views": rows.iter().map(|r| json!({
+    }
+
+    pub fn table(&self) -> String {
+        table(&self.rows, self.median, self.truth.as_deref())
+    }
+
+    pub fn to_json(&self) -> Value {
+        json!({
+            "scene": self.scene,
+            "truth": self.truth,
+            "views": self.rows.iter().map(|r| json!({
                 "view": r.name,
                 "focus_distance": r.focus,
                 "aperture": r.aperture,
@@ -77,12 +96,22 @@ pub fn run(a: &LensArgs, g: &Global) -> Result<()> {
                 "true_aperture": r.true_aperture,
                 "focus_relative_error": r.true_focus.map(|t| rel(r.focus, t)),
             })).collect::<Vec<Value>>(),
-            "median_focus_relative_error": median,
-        });
-        println!("{}", serde_json::to_string_pretty(&out)?);
-        return Ok(());
+            "median_focus_relative_error": self.median,
+        })
     }
-    print!("{}", table(&rows, median, truth.as_deref()));
+}
+
+fn rel(a: f64, b: f64) -> f64 {
+    (a - b).abs() / b
+}
+
+pub fn run(a: &LensArgs, g: &Global) -> Result<()> {
+    let report = LensReport::read(&a.scene, a.truth.clone())?;
+    if g.json {
+        println!("{}", serde_json::to_string_pretty(&report.to_json())?);
+    } else {
+        print!("{}", report.table());
+    }
     Ok(())
 }
 

@@ -96,7 +96,7 @@ pub fn run(
     print_result(g, &summary, output)
 }
 
-fn frame_files(dir: &Path) -> Result<Vec<PathBuf>> {
+pub(crate) fn frame_files(dir: &Path) -> Result<Vec<PathBuf>> {
     let mut frames: Vec<PathBuf> = std::fs::read_dir(dir)
         .with_context(|| format!("{}", dir.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -113,7 +113,7 @@ fn frame_files(dir: &Path) -> Result<Vec<PathBuf>> {
     Ok(frames)
 }
 
-fn write_gif(frames: &[PathBuf], out: &Path) -> Result<()> {
+pub(crate) fn write_gif(frames: &[PathBuf], out: &Path) -> Result<()> {
     use image::codecs::gif::{GifEncoder, Repeat};
     use image::{Delay, Frame};
     let file = std::fs::File::create(out).with_context(|| format!("{}", out.display()))?;
