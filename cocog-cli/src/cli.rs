@@ -618,7 +618,7 @@ pub struct DemoArgs {
     /// Where to put the demo's dataset and scenes.
     #[arg(short, long, default_value = "cocog-demo")]
     pub output: PathBuf,
-    /// The larger version for a GPU: a 192×144 dataset (same blur in pixels) and 7000
+    /// The larger version for a GPU: the same photographs at 192×144 and 7000
     /// iterations per method instead of 64×48 and 1200. On a CPU it takes hours.
     #[arg(long)]
     pub full: bool,
