@@ -494,8 +494,9 @@ pub struct RenderArgs {
     /// trained over (train --background).
     #[arg(long)]
     pub background: Option<String>,
-    /// Only these views: comma-separated names or stems (e.g. 000,008). Default: the split.
-    #[arg(long)]
+    /// Only these views: comma-separated names or stems (e.g. 000,008); --view NAME for one.
+    /// Default: the split.
+    #[arg(long, visible_alias = "view")]
     pub views: Option<String>,
     /// New cameras instead of the scene's views, from a JSON file in scene.json's convention:
     /// {"world_from_camera": [[4 numbers] × 4] (OpenCV axes: x right, y down, z forward),
