@@ -33,7 +33,10 @@ impl Stage for Resolving {
 }
 
 fn entry() -> StageEntry {
-    let stage: Arc<dyn Stage> = Arc::new(Resolving);
+    built_in(Arc::new(Resolving))
+}
+
+fn built_in(stage: Arc<dyn Stage>) -> StageEntry {
     StageEntry {
         info: stage.info(),
         stage,
@@ -107,12 +110,7 @@ fn a_superseded_checkpoint_and_log_are_removed_after_the_commit_and_only_then() 
     let input = tmp.path().join("in");
     std::fs::create_dir(&input).unwrap();
     one_view_scene().save(&input).unwrap();
-    let stage: Arc<dyn Stage> = Arc::new(Checkpointing);
-    let entry = StageEntry {
-        info: stage.info(),
-        stage,
-        provider: Provider::BuiltIn,
-    };
+    let entry = built_in(Arc::new(Checkpointing));
     let ckpt = tmp.path().join("out.checkpoint");
     let log = tmp.path().join("out.train-log.jsonl");
     for (done, kept) in [(false, true), (true, false)] {
@@ -174,12 +172,7 @@ fn a_scene_output_carries_its_model_files_and_outlives_its_input() {
     ] {
         std::fs::write(input.join(file), text).unwrap();
     }
-    let stage: Arc<dyn Stage> = Arc::new(Rebasing);
-    let entry = StageEntry {
-        info: stage.info(),
-        stage,
-        provider: Provider::BuiltIn,
-    };
+    let entry = built_in(Arc::new(Rebasing));
     let out = tmp.path().join("out");
     run_stage(&entry, &input, &out, &Map::new(), false, &NullContext).unwrap();
     // The model files are copied and referenced relatively; the stage's own file is kept and
@@ -224,12 +217,7 @@ fn copy_images_makes_a_scene_self_contained() {
     std::fs::write(input.join("a.png"), "photo a").unwrap();
     std::fs::write(other.join("a.png"), "photo b").unwrap();
     std::fs::write(input.join("d.exr"), "depth b").unwrap();
-    let stage: Arc<dyn Stage> = Arc::new(Rebasing);
-    let entry = StageEntry {
-        info: stage.info(),
-        stage,
-        provider: Provider::BuiltIn,
-    };
+    let entry = built_in(Arc::new(Rebasing));
     let out = tmp.path().join("out");
     let how = RunHow {
         copy_images: true,
