@@ -28,6 +28,9 @@ struct Task {
     bar: ProgressBar,
     started: Instant,
     last_line: Instant,
+    /// Count at the first report: a resumed run starts mid-way, and rates must count only the
+    /// work done since.
+    first: u64,
 }
 
 impl CliContext {
@@ -96,10 +99,17 @@ impl Context for CliContext {
         let Ok(mut tasks) = self.tasks.lock() else {
             return;
         };
-        let t = tasks.entry(task.to_owned()).or_insert_with(|| Task {
-            bar: self.new_bar(task, total),
-            started: Instant::now(),
-            last_line: Instant::now(),
+        let t = tasks.entry(task.to_owned()).or_insert_with(|| {
+            let bar = self.new_bar(task, total);
+            bar.set_position(done);
+            // The bar's rate estimate must not read the resumed start as work just done.
+            bar.reset_eta();
+            Task {
+                bar,
+                started: Instant::now(),
+                last_line: Instant::now(),
+                first: done,
+            }
         });
         if total > 0 && t.bar.length() != Some(total) {
             t.bar.set_length(total);
@@ -107,18 +117,15 @@ impl Context for CliContext {
         t.bar.set_position(done);
         if total > 0 && done >= total {
             t.bar.finish_and_clear();
-            let secs = t.started.elapsed().as_secs_f64();
-            let rate = if secs > 0.0 { done as f64 / secs } else { 0.0 };
+            let line = finished_line(task, done, total, t.first, t.started.elapsed());
             tasks.remove(task);
-            self.log(
-                LogLevel::Info,
-                &format!("{task}: {done}/{total} in {secs:.1} s ({rate:.1}/s)"),
-            );
+            self.log(LogLevel::Info, &line);
         } else if let Some(every) = self.line_every
             && t.last_line.elapsed() >= every
         {
             t.last_line = Instant::now();
-            eprintln!("{}", progress_line(task, done, total, t.started.elapsed()));
+            let line = progress_line(task, done, total, t.first, t.started.elapsed());
+            eprintln!("{line}");
         }
     }
 
@@ -127,11 +134,32 @@ impl Context for CliContext {
     }
 }
 
-/// `train: 1200/7000 (17%), 9.8/s, 2m 03s elapsed, about 9m 55s left`; without a total, the
-/// count and rate only.
-fn progress_line(task: &str, done: u64, total: u64, elapsed: Duration) -> String {
+/// Items per second since the task's first report at count `first`.
+fn rate(done: u64, first: u64, secs: f64) -> f64 {
+    if secs > 0.0 {
+        done.saturating_sub(first) as f64 / secs
+    } else {
+        0.0
+    }
+}
+
+/// `train: 7000/7000 in 123.0 s (9.8/s)`; a resumed task says where it resumed.
+fn finished_line(task: &str, done: u64, total: u64, first: u64, elapsed: Duration) -> String {
     let secs = elapsed.as_secs_f64();
-    let rate = if secs > 0.0 { done as f64 / secs } else { 0.0 };
+    let rate = rate(done, first, secs);
+    let resumed = if first > 0 {
+        format!(", resumed at {first}")
+    } else {
+        String::new()
+    };
+    format!("{task}: {done}/{total} in {secs:.1} s ({rate:.1}/s{resumed})")
+}
+
+/// `train: 1200/7000 (17%), 9.8/s, 2m 03s elapsed, about 9m 55s left`; without a total, the
+/// count and rate only. Rate and time left count from `first`, the count at the first report.
+fn progress_line(task: &str, done: u64, total: u64, first: u64, elapsed: Duration) -> String {
+    let secs = elapsed.as_secs_f64();
+    let rate = rate(done, first, secs);
     let mut line = format!("{task}: {done}");
     if total > 0 {
         let percent = 100.0 * done as f64 / total as f64;
@@ -160,12 +188,25 @@ mod tests {
 
     #[test]
     fn progress_lines_give_count_rate_and_time_left() {
-        let line = progress_line("train", 1200, 7000, Duration::from_secs(123));
+        let line = progress_line("train", 1200, 7000, 0, Duration::from_secs(123));
         assert_eq!(
             line,
             "train: 1200/7000 (17%), 9.8/s, 2m 03s elapsed, about 9m 55s left"
         );
-        let line = progress_line("load", 5, 0, Duration::from_secs(4000));
+        let line = progress_line("load", 5, 0, 0, Duration::from_secs(4000));
         assert_eq!(line, "load: 5, 0.0/s, 1h 06m elapsed");
+    }
+
+    #[test]
+    fn a_resumed_task_counts_its_rate_from_where_it_resumed() {
+        let line = progress_line("train", 6000, 7000, 5000, Duration::from_secs(100));
+        assert_eq!(
+            line,
+            "train: 6000/7000 (86%), 10.0/s, 1m 40s elapsed, about 1m 40s left"
+        );
+        let line = finished_line("train", 2641, 2641, 2640, Duration::from_millis(500));
+        assert_eq!(line, "train: 2641/2641 in 0.5 s (2.0/s, resumed at 2640)");
+        let line = finished_line("train", 300, 300, 0, Duration::from_secs(30));
+        assert_eq!(line, "train: 300/300 in 30.0 s (10.0/s)");
     }
 }

@@ -138,6 +138,8 @@ impl<'c> Session<'c> {
         // Scoring the test views is not training: it/s leaves it out.
         let mut eval_seconds = 0.0;
         let mut watch = DropWatch::new(self.views);
+        // Where the run starts, so the host counts rates from here, not from iteration 0.
+        ctx.progress("train", u64::from(first - 1), u64::from(total));
         for it in first..=total {
             if ctx.cancelled() {
                 self.save_on_interrupt(ctx)?;
