@@ -118,6 +118,7 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
                 "coc_modulate_base" => a.coc_sharp_base.then_some(false),
                 "coc_head_init" => a.coc_head_init,
                 "kernel_lr" => a.kernel_lr,
+                "focus_init" => a.focus_init.as_ref().map(|p| p.display().to_string()),
                 "sh_degree" => a.sh_degree,
                 "random_background" => a.random_background.then_some(true),
                 "background" => a.background.clone(),

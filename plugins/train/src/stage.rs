@@ -71,6 +71,13 @@ fn options() -> Vec<OptionSpec> {
             "cocog: initial learning rate of h_θ, F and the focus distances, decaying 100× \
              over the run (1e-3 in both sources; short runs learn the lens faster with more)",
         ),
+        OptionSpec::optional(
+            "focus_init",
+            OptionKind::Path,
+            "cocog: start each training photo's focus distance from a known one: a \
+             transforms.json whose frames carry focus_distance_m in scene units (the cocog \
+             bench, the demo dataset); default: the mean camera-to-Gaussian distance",
+        ),
         OptionSpec::float(
             "coc_head_init",
             1.0,
@@ -353,6 +360,11 @@ impl Stage for Train {
         // The scale comes from the initial points even when resuming, so a resumed run
         // continues with the scale it started with.
         let points = load::initial_gaussians(&scene, &req.input)?;
+        if let (Some(c), Some(path)) =
+            (plan.config.coc.as_mut(), req.options.get_path("focus_init"))
+        {
+            c.initial_focus = Some(load::known_focus(&scene, &path)?);
+        }
         let views =
             load::views_scratch(&scene, req, Split::Train, plan.downscale, &plan.config, ctx)?;
         let test = (plan.eval_every > 0)

@@ -2,7 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
-use cocog_pipeline::{NullContext, Options, Scene, Stage, StageError, StageRequest};
+use cocog_pipeline::{NullContext, Options, Scene, Split, Stage, StageError, StageRequest};
 use serde_json::{Map, Value, json};
 
 fn gpu_available() -> bool {
@@ -390,4 +390,92 @@ fn the_live_log_is_told_and_the_test_views_are_scored_into_it() {
     )
     .unwrap_err();
     assert!(err.to_string().contains("no test views"), "{err}");
+}
+
+/// `focus_init` seeds every photo's focus distance from a transforms.json (matched by file
+/// name), and one photo without a focus there is an error that names it.
+#[test]
+fn known_focus_distances_seed_the_lens_and_gaps_are_named() {
+    if !gpu_available() {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let scene_dir = ingested(tmp.path());
+    let transforms = tmp.path().join("data/transforms.json");
+    let doc: Value = serde_json::from_str(&std::fs::read_to_string(&transforms).unwrap()).unwrap();
+    let truth: std::collections::HashMap<String, f64> = doc["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|f| {
+            let name = Path::new(f["file_path"].as_str()?).file_name()?;
+            Some((
+                name.to_string_lossy().into_owned(),
+                f["focus_distance_m"].as_f64()?,
+            ))
+        })
+        .collect();
+    let train = stage(cocog_train::stages(), "train");
+    // The lens starts at the blur start and barely learns in 3 steps at this rate.
+    let options = json!({"method": "cocog", "iterations": 3, "blur_start": 1,
+        "coc_head_init": 0.0, "kernel_lr": 1e-9, "focus_init": transforms});
+    let out = tmp.path().join("t");
+    run(train.as_ref(), &scene_dir, &out, options.clone()).unwrap();
+    let scene = Scene::load(&out).unwrap();
+    let mut seen = 0;
+    for v in scene.views.iter().filter(|v| v.split == Split::Train) {
+        let learned = v.lens.as_ref().unwrap().focus_distance;
+        let known = truth[&v.name];
+        assert!(
+            (learned - known).abs() <= 1e-5 * known,
+            "{}: {learned} vs {known}",
+            v.name
+        );
+        seen += 1;
+    }
+    assert!(seen >= 2, "{seen} training views");
+
+    // Without it the focus starts elsewhere: the option is what put it there.
+    let plain = tmp.path().join("p");
+    let mut without = options.as_object().unwrap().clone();
+    without.remove("focus_init");
+    run(train.as_ref(), &scene_dir, &plain, Value::Object(without)).unwrap();
+    let scene = Scene::load(&plain).unwrap();
+    let differs = scene
+        .views
+        .iter()
+        .filter(|v| v.split == Split::Train)
+        .any(|v| (v.lens.as_ref().unwrap().focus_distance - truth[&v.name]).abs() > 1e-3);
+    assert!(differs);
+
+    let mut gap = doc.clone();
+    let first_train = gap["frames"]
+        .as_array_mut()
+        .unwrap()
+        .iter_mut()
+        .find(|f| f["focus_distance_m"].is_number())
+        .unwrap();
+    first_train["focus_distance_m"] = Value::Null;
+    let named = Path::new(first_train["file_path"].as_str().unwrap())
+        .file_name()
+        .unwrap()
+        .to_string_lossy()
+        .into_owned();
+    let gappy = tmp.path().join("gappy.json");
+    std::fs::write(&gappy, serde_json::to_string(&gap).unwrap()).unwrap();
+    let mut with_gap = options.as_object().unwrap().clone();
+    with_gap.insert("focus_init".into(), json!(gappy));
+    let err = run(
+        train.as_ref(),
+        &scene_dir,
+        &tmp.path().join("g"),
+        Value::Object(with_gap),
+    )
+    .unwrap_err();
+    assert!(matches!(err, StageError::Input(_)), "{err:?}");
+    let said = err.to_string();
+    assert!(
+        said.contains("gappy.json") && said.contains(&named),
+        "{said}"
+    );
 }

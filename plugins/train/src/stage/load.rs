@@ -119,3 +119,59 @@ pub fn split_views(
     ctx.progress(task, total, total);
     Ok(out)
 }
+
+/// Known focus distances (scene units), one per training view in the scene's order, from a
+/// transforms.json whose frames carry `focus_distance_m` (the cocog bench and demo datasets;
+/// a converter can write a camera's EXIF subject distance there). Frames match views by file
+/// name; every training view must have one.
+pub fn known_focus(scene: &Scene, path: &Path) -> Result<Vec<f64>, StageError> {
+    let frames = cocog_formats::nerf::read_transforms(path, None)
+        .map_err(|e| StageError::Input(format!("option 'focus_init': {e}")))?;
+    let by_name: std::collections::HashMap<String, Option<f64>> = frames
+        .iter()
+        .map(|f| {
+            let name = Path::new(&f.file_path)
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            (name, f.focus_distance)
+        })
+        .collect();
+    let mut known = Vec::new();
+    let mut missing = Vec::new();
+    for v in scene.views.iter().filter(|v| v.split == Split::Train) {
+        let stem = |n: &str| {
+            Path::new(n)
+                .with_extension("")
+                .to_string_lossy()
+                .into_owned()
+        };
+        let found = by_name
+            .get(&v.name)
+            .or_else(|| {
+                by_name
+                    .iter()
+                    .find(|(k, _)| stem(k) == stem(&v.name))
+                    .map(|e| e.1)
+            })
+            .copied()
+            .flatten()
+            .filter(|d| d.is_finite() && *d > 0.0);
+        match found {
+            Some(d) => known.push(d),
+            None => missing.push(v.name.clone()),
+        }
+    }
+    if !missing.is_empty() {
+        let shown: Vec<&str> = missing.iter().take(5).map(String::as_str).collect();
+        return Err(StageError::Input(format!(
+            "option 'focus_init': {} has no positive `focus_distance_m` for {} training view(s): \
+             {}{}",
+            path.display(),
+            missing.len(),
+            shown.join(", "),
+            if missing.len() > 5 { ", ..." } else { "" }
+        )));
+    }
+    Ok(known)
+}
