@@ -310,11 +310,13 @@ pub struct TrainArgs {
     /// run. Default 1e-3 (both sources); short runs learn the lens faster with more.
     #[arg(long = "kernel-lr", value_parser = finite)]
     pub kernel_lr: Option<f64>,
-    /// cocog: start each photo's focus distance from a known one, read from a transforms.json
-    /// whose frames carry `focus_distance_m` in scene units (the cocog bench and demo datasets
-    /// have it). Default: the mean distance from the camera to the Gaussians, as the sources.
-    #[arg(long = "focus-init", value_name = "TRANSFORMS_JSON")]
-    pub focus_init: Option<std::path::PathBuf>,
+    /// cocog: where each photo's focus distance starts. `mean`: the mean distance from the
+    /// camera to the Gaussians, as both sources (default); `estimate`: depth from defocus at
+    /// the blur start, fitting each photo with the warm-up render blurred by a thin lens; or a
+    /// transforms.json whose frames carry `focus_distance_m` in scene units (the cocog bench
+    /// and demo datasets have it).
+    #[arg(long = "focus-init", value_name = "mean|estimate|TRANSFORMS_JSON")]
+    pub focus_init: Option<String>,
     /// Train on images downscaled by N (intrinsics scaled to match). Default 1.
     #[arg(long)]
     pub downscale: Option<u32>,

@@ -22,6 +22,10 @@ pub struct CocTrainConfig {
     /// Known focus distances (scene units), one per training view, to start from instead of
     /// the mean camera-to-Gaussian distance (EXIF subject distance, a synthetic dataset's).
     pub initial_focus: Option<Vec<f64>>,
+    /// Without a known start, estimate each photo's focus at the blur start by depth from
+    /// defocus against the warm-up Gaussians (`focus_estimate.rs`) instead of the mean
+    /// camera-to-Gaussian distance of both sources.
+    pub estimate_focus: bool,
     /// Multiplies the initial weights and biases of h_θ's heads (PyTorch's default: 1). Small
     /// values start the copies near their base instead of scattered by the untrained heads;
     /// 0 renders M + 1 exact copies of the base at first (what the wiring test compares with
@@ -43,6 +47,7 @@ impl CocTrainConfig {
             kernel_lr_final: 1e-5,
             compositor_channels: 64,
             initial_focus: None,
+            estimate_focus: false,
             head_init_scale: 1.0,
         }
     }

@@ -19,6 +19,7 @@ mod config;
 mod densify;
 mod drop_watch;
 mod error;
+mod focus_estimate;
 mod init;
 mod order;
 mod scale;

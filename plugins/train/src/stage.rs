@@ -78,6 +78,13 @@ fn options() -> Vec<OptionSpec> {
              transforms.json whose frames carry focus_distance_m in scene units (the cocog \
              bench, the demo dataset); default: the mean camera-to-Gaussian distance",
         ),
+        OptionSpec::bool(
+            "focus_estimate",
+            false,
+            "cocog: without focus_init, estimate each photo's focus at the blur start by depth \
+             from defocus (the warm-up render blurred by a thin lens, fitted to the photo) \
+             instead of the mean camera-to-Gaussian distance",
+        ),
         OptionSpec::float(
             "coc_head_init",
             1.0,
@@ -225,6 +232,7 @@ fn coc_config(req: &StageRequest, iterations: u32) -> Result<Option<CocTrainConf
     }
     c.kernel_lr_final *= lr / c.kernel_lr_init;
     c.kernel_lr_init = lr;
+    c.estimate_focus = req.options.get_bool("focus_estimate").unwrap_or(false);
     if c.blur_start > iterations {
         return Err(StageError::Options(format!(
             "stage 'train': blur_start {} is past the last iteration ({iterations}): the run \

@@ -14,6 +14,7 @@ mod capacity;
 mod coc;
 mod coc_step;
 mod density;
+mod focus;
 mod snapshot;
 
 /// Steps the CPU may run ahead of the GPU; their read-backs arrive this many steps late.
@@ -438,6 +439,18 @@ impl<'c> Trainer<'c> {
             reset_opacity: d.as_ref().is_some_and(|d| d.resets_opacity_at(it)),
         };
         let background = self.background_at(it);
+        let estimate = self.coc.as_ref().is_some_and(|c| {
+            c.focus.is_none()
+                && c.config.estimate_focus
+                && c.config.initial_focus.is_none()
+                && c.config.blurs_at(it)
+        });
+        if estimate {
+            let found = self.estimate_focus()?;
+            if let Some(c) = self.coc.as_mut() {
+                c.config.initial_focus = Some(found);
+            }
+        }
         let mut batch = self.batch.take().ok_or(TrainError::Poisoned)?;
         let result = self
             .aim(&mut batch, self.cameras[view], background)

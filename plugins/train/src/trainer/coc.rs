@@ -214,9 +214,14 @@ impl CocState {
             })
             .collect();
         let scale = if max_depth > 0.0 { max_depth } else { 1.0 };
-        let start = match &self.config.initial_focus {
-            Some(known) if known.len() == means_of.len() => known,
-            _ => &means_of,
+        // A known or estimated start where there is one, else the mean distance.
+        let start: Vec<f64> = match &self.config.initial_focus {
+            Some(known) if known.len() == means_of.len() => known
+                .iter()
+                .zip(&means_of)
+                .map(|(&k, &m)| if k.is_finite() && k > 0.0 { k } else { m })
+                .collect(),
+            _ => means_of,
         };
         let values: Vec<f32> = start.iter().map(|d| (d / scale) as f32).collect();
         // CoC in pixels = f·A·|1/d − 1/d_F|; at d = d_F/2 that is f·A/d_F = 2 → A = 2·d_F/f.
