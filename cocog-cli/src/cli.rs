@@ -280,9 +280,12 @@ pub struct TrainArgs {
     /// cocog: CoC Gaussians per base Gaussian, M. Default: the variant's (code 4, paper 5).
     #[arg(long = "coc-gaussians")]
     pub coc_gaussians: Option<u64>,
-    /// cocog: `code` (the released code: free offsets gated by |1/d - 1/d_F|, h_θ and F from
-    /// iteration 1500) or `paper` (aperture K, scaling β, directions; h_θ from 2000 with the
-    /// renders averaged, F from 6000). Default code.
+    /// cocog: `lens` (a thin lens per photo: the CoC radius follows that photo's learned
+    /// aperture and focus distance, h_θ shapes the copies inside it; h_θ from 2000 with the
+    /// renders averaged, F from 6000), `code` (the released code: free offsets gated by
+    /// |1/d - 1/d_F|, h_θ and F from 1500) or `paper` (aperture K, scaling β, directions from
+    /// h_θ; scheduled as lens). Default lens: on both dev scenes it learns the focus and beats
+    /// 3dgs where code fell behind (BENCHMARKS.md).
     #[arg(long = "coc-variant")]
     pub coc_variant: Option<String>,
     /// cocog: first iteration rendered through the CoC Gaussians (plain 3DGS before).
@@ -660,8 +663,8 @@ pub struct BenchArgs {
     /// the first timed iteration on. Default 3dgs.
     #[arg(long, value_enum, default_value_t = Method::Gs3d)]
     pub method: Method,
-    /// cocog: `code` or `paper` (see `cocog train --help`). Default code.
-    #[arg(long = "coc-variant", default_value = "code")]
+    /// cocog: `lens`, `code` or `paper` (see `cocog train --help`). Default lens.
+    #[arg(long = "coc-variant", default_value = "lens")]
     pub coc_variant: String,
     /// cocog: CoC Gaussians per base Gaussian, M. Default: the variant's.
     #[arg(long = "coc-gaussians")]

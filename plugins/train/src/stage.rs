@@ -37,10 +37,12 @@ fn options() -> Vec<OptionSpec> {
         ),
         OptionSpec::string(
             "coc_variant",
-            "code",
-            "cocog: code (the released code: free offsets gated by |1/d - 1/d_F|, 4 copies, \
-             h_θ and F from 1500) or paper (aperture, scaling, directions; 5 copies, h_θ from \
-             2000 averaged, F from 6000)",
+            "lens",
+            "cocog: lens (a thin lens per photo: the CoC radius from that photo's learned \
+             aperture and focus, β and directions from h_θ; 5 copies, h_θ from 2000 averaged, \
+             F from 6000; the best on the dev scenes), code (the released code: free offsets \
+             gated by |1/d - 1/d_F|, 4 copies, h_θ and F from 1500) or paper (aperture, \
+             scaling, directions from h_θ; as lens otherwise)",
         ),
         OptionSpec::int(
             "blur_start",
@@ -193,7 +195,7 @@ fn coc_config(req: &StageRequest, iterations: u32) -> Result<Option<CocTrainConf
             )));
         }
     }
-    let name = req.options.get_str("coc_variant").unwrap_or("code");
+    let name = req.options.get_str("coc_variant").unwrap_or("lens");
     let variant = CocVariant::parse(name).ok_or_else(|| {
         StageError::Options(format!(
             "stage 'train' option 'coc_variant': unknown variant '{name}' (use code, paper or \
