@@ -181,17 +181,9 @@ fn read_truth(path: &Path) -> Result<HashMap<String, TrueLens>> {
         .with_context(|| format!("reading the true lenses from {}", path.display()))?;
     Ok(frames
         .into_iter()
-        .filter_map(|f| {
-            let name = Path::new(&f.file_path)
-                .file_name()?
-                .to_string_lossy()
-                .into_owned();
-            let name = if Path::new(&name).extension().is_none() {
-                format!("{name}.png")
-            } else {
-                name
-            };
-            Some((name, (f.focus_distance, f.aperture_radius.map(|r| 2.0 * r))))
+        .map(|f| {
+            let lens = (f.focus_distance, f.aperture_radius.map(|r| 2.0 * r));
+            (f.image_name(), lens)
         })
         .collect())
 }

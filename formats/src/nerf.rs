@@ -126,6 +126,20 @@ impl NerfFrame {
             p
         }
     }
+
+    /// The file name a scene gives the frame's view (what ingest names it): the last part of
+    /// `file_path`, with `.png` appended when Blender left the extension off.
+    pub fn image_name(&self) -> String {
+        let name = Path::new(&self.file_path)
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        if Path::new(&name).extension().is_none() {
+            format!("{name}.png")
+        } else {
+            name
+        }
+    }
 }
 
 /// Where a value sits, for messages: the file, `frames[i].` (empty at the top level), and the

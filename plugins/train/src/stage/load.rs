@@ -129,13 +129,7 @@ pub fn known_focus(scene: &Scene, path: &Path) -> Result<Vec<f64>, StageError> {
         .map_err(|e| StageError::Input(format!("option 'focus_init': {e}")))?;
     let by_name: std::collections::HashMap<String, Option<f64>> = frames
         .iter()
-        .map(|f| {
-            let name = Path::new(&f.file_path)
-                .file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_default();
-            (name, f.focus_distance)
-        })
+        .map(|f| (f.image_name(), f.focus_distance))
         .collect();
     let mut known = Vec::new();
     let mut missing = Vec::new();
