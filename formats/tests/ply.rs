@@ -250,6 +250,18 @@ fn bad_plys_are_refused_clearly() {
     );
     let e = read_splats(&huge).unwrap_err().to_string();
     assert!(e.contains("cannot fit"), "{e}");
+    // Property-less rows before the vertex cost no bytes but one loop turn each; fuzzing found
+    // four billion of them hang the reader.
+    let empty_rows = write_raw(
+        d,
+        "empty-rows.ply",
+        b"ply\nformat binary_little_endian 1.0\nelement junk 4000000000\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\nAAAABBBBCCCC",
+    );
+    let e = read_points(&empty_rows).unwrap_err().to_string();
+    assert!(
+        e.contains("empty-rows.ply") && e.contains("element junk") && e.contains("cannot fit"),
+        "{e}"
+    );
     let missing = write_raw(
         d,
         "missing.ply",

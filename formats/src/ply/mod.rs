@@ -63,16 +63,25 @@ pub(crate) fn open_at_vertex(path: &Path) -> Result<(Reader, ElementDef)> {
     }
     // A binary row has at least one byte per property and an ascii value at least two, so a
     // count larger than that is a truncated or lying header; checking first bounds allocation.
-    let min_bytes = vertex.count as u128 * vertex.properties.len().max(1) as u128;
-    if min_bytes > u128::from(file_len) {
-        return Err(FormatError::invalid(
-            path,
-            "element vertex",
-            format!(
-                "count {} cannot fit: the file has only {file_len} bytes (truncated?)",
-                vertex.count
-            ),
-        ));
+    // Elements read (or skipped) before the vertex count too, and a property-less row is
+    // charged one byte: otherwise `element junk 4000000000` with no properties is a loop of
+    // four billion empty rows before the first vertex.
+    let mut min_bytes = 0u128;
+    for element in &header.elem_defs {
+        min_bytes += element.count as u128 * element.properties.len().max(1) as u128;
+        if min_bytes > u128::from(file_len) {
+            return Err(FormatError::invalid(
+                path,
+                format!("element {}", element.name),
+                format!(
+                    "count {} cannot fit: the file has only {file_len} bytes (truncated?)",
+                    element.count
+                ),
+            ));
+        }
+        if element.name == "vertex" {
+            break;
+        }
     }
     while reader.current_element().is_some_and(|e| e.name != "vertex") {
         let name = reader
