@@ -281,10 +281,10 @@ pub struct TrainArgs {
     #[arg(long = "coc-gaussians")]
     pub coc_gaussians: Option<u64>,
     /// cocog: `lens` (a thin lens per photo: the CoC radius follows that photo's learned
-    /// aperture and focus distance, h_θ shapes the copies inside it; h_θ from 2000 with the
-    /// renders averaged, F from 6000), `code` (the released code: free offsets gated by
-    /// |1/d - 1/d_F|, h_θ and F from 1500) or `paper` (aperture K, scaling β, directions from
-    /// h_θ; scheduled as lens). Default lens: on both dev scenes it learns the focus and beats
+    /// aperture and focus distance, h_θ shapes the copies inside it; copies centred on their
+    /// base, heads started at 0.01, h_θ from 1000 with the renders averaged, F from 6000),
+    /// `code` (the released code: free offsets gated by |1/d - 1/d_F|, h_θ and F from 1500)
+    /// or `paper` (aperture K, scaling β, directions from h_θ; h_θ from 2000, F from 6000). Default lens: on both dev scenes it learns the focus and beats
     /// 3dgs where code fell behind (BENCHMARKS.md).
     #[arg(long = "coc-variant")]
     pub coc_variant: Option<String>,
@@ -298,15 +298,18 @@ pub struct TrainArgs {
     #[arg(long = "compositor-channels")]
     pub compositor_channels: Option<u64>,
     /// cocog: subtract the copies' mean offset, so the CoC Gaussians sit around their base as
-    /// a circle of confusion sits around its in-focus point.
-    #[arg(long = "coc-centred")]
-    pub coc_centred: bool,
+    /// a circle of confusion sits around its in-focus point. Default: on for lens, off for
+    /// code and paper; `--coc-centred=false` turns it off.
+    #[arg(long = "coc-centred", num_args = 0..=1, require_equals = true,
+          default_missing_value = "true", value_name = "BOOL")]
+    pub coc_centred: Option<bool>,
     /// cocog: leave the base set's scale and rotation unmodulated while training, so training
     /// renders the base as the test views do (the released code modulates it).
     #[arg(long = "coc-sharp-base")]
     pub coc_sharp_base: bool,
     /// cocog: scale of h_θ's initial head weights (1 = PyTorch's default; smaller starts the
-    /// CoC Gaussians near their base instead of scattered).
+    /// CoC Gaussians near their base instead of scattered). Default: 0.01 for lens, 1 for code
+    /// and paper.
     #[arg(long = "coc-head-init", value_parser = finite)]
     pub coc_head_init: Option<f64>,
     /// cocog: initial learning rate of h_θ, F and the focus distances, decaying 100× over the
@@ -672,9 +675,10 @@ pub struct BenchArgs {
     /// cocog: hidden channels of F. Default 64.
     #[arg(long = "compositor-channels", default_value_t = 64)]
     pub compositor_channels: u32,
-    /// cocog: centred CoC copies (as `train --coc-centred`; a --resume of such a run needs it).
-    #[arg(long = "coc-centred")]
-    pub coc_centred: bool,
+    /// cocog: centred CoC copies (as `train --coc-centred`). Default: the variant's.
+    #[arg(long = "coc-centred", num_args = 0..=1, require_equals = true,
+          default_missing_value = "true", value_name = "BOOL")]
+    pub coc_centred: Option<bool>,
     /// Also time every GPU kernel (timestamp queries) over the profiled iterations.
     #[arg(long)]
     pub kernels: bool,

@@ -114,7 +114,7 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
                 "coc_variant" => a.coc_variant.clone(), "blur_start" => a.blur_start,
                 "composite_start" => a.composite_start,
                 "compositor_channels" => a.compositor_channels,
-                "coc_centred" => a.coc_centred.then_some(true),
+                "coc_centred" => a.coc_centred,
                 "coc_modulate_base" => a.coc_sharp_base.then_some(false),
                 "coc_head_init" => a.coc_head_init,
                 "kernel_lr" => a.kernel_lr,
@@ -256,7 +256,9 @@ fn bench(a: &crate::cli::BenchArgs, g: &Global, ctx: &dyn Context) -> Result<()>
                     .into());
                 }
                 c.net.copies = copies;
-                c.net.centred = a.coc_centred;
+                if let Some(centred) = a.coc_centred {
+                    c.net.centred = centred;
+                }
                 c.compositor_channels = a.compositor_channels;
                 Some(c)
             }

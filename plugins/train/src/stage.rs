@@ -39,10 +39,10 @@ fn options() -> Vec<OptionSpec> {
             "coc_variant",
             "lens",
             "cocog: lens (a thin lens per photo: the CoC radius from that photo's learned \
-             aperture and focus, β and directions from h_θ; 5 copies, h_θ from 2000 averaged, \
-             F from 6000; the best on the dev scenes), code (the released code: free offsets \
-             gated by |1/d - 1/d_F|, 4 copies, h_θ and F from 1500) or paper (aperture, \
-             scaling, directions from h_θ; as lens otherwise)",
+             aperture and focus, β and directions from h_θ; 5 copies centred on their base, h_θ \
+             from 1000 averaged, F from 6000; the best on the dev scenes), code (the released \
+             code: free offsets gated by |1/d - 1/d_F|, 4 copies, h_θ and F from 1500) or paper \
+             (aperture, scaling, directions from h_θ; 5 copies, h_θ from 2000, F from 6000)",
         ),
         OptionSpec::int(
             "blur_start",
@@ -55,11 +55,11 @@ fn options() -> Vec<OptionSpec> {
             "cocog: first iteration composited by the CNN F (the sets are averaged before); \
              0 = the variant's",
         ),
-        OptionSpec::bool(
+        OptionSpec::optional(
             "coc_centred",
-            false,
+            OptionKind::Bool,
             "cocog: subtract the copies' mean offset, so the CoC Gaussians sit around their base \
-             (neither published source does)",
+             (neither published source does); default: on for lens, off for code and paper",
         ),
         OptionSpec::bool(
             "coc_modulate_base",
@@ -87,11 +87,12 @@ fn options() -> Vec<OptionSpec> {
              from defocus (the warm-up render blurred by a thin lens, fitted to the photo) \
              instead of the mean camera-to-Gaussian distance",
         ),
-        OptionSpec::float(
+        OptionSpec::optional(
             "coc_head_init",
-            1.0,
+            OptionKind::Float,
             "cocog: scale of h_θ's initial head weights (1 = PyTorch's default, as both sources; \
-             smaller starts the CoC Gaussians near their base)",
+             smaller starts the CoC Gaussians near their base); default: 0.01 for lens, 1 for \
+             code and paper",
         ),
         OptionSpec::int(
             "compositor_channels",
@@ -217,15 +218,18 @@ fn coc_config(req: &StageRequest, iterations: u32) -> Result<Option<CocTrainConf
         c.composite_start = composite;
     }
     c.compositor_channels = int(req, "compositor_channels", 1, 256)? as u32;
-    c.net.centred = req.options.get_bool("coc_centred").unwrap_or(false);
-    c.net.modulate_base = req.options.get_bool("coc_modulate_base").unwrap_or(true);
-    let head_init = req.options.get_f64("coc_head_init").unwrap_or(1.0);
-    if !(0.0..=10.0).contains(&head_init) {
-        return Err(StageError::Options(format!(
-            "stage 'train' option 'coc_head_init' must be in 0..=10, got {head_init}"
-        )));
+    if let Some(centred) = req.options.get_bool("coc_centred") {
+        c.net.centred = centred;
     }
-    c.head_init_scale = head_init as f32;
+    c.net.modulate_base = req.options.get_bool("coc_modulate_base").unwrap_or(true);
+    if let Some(head_init) = req.options.get_f64("coc_head_init") {
+        if !(0.0..=10.0).contains(&head_init) {
+            return Err(StageError::Options(format!(
+                "stage 'train' option 'coc_head_init' must be in 0..=10, got {head_init}"
+            )));
+        }
+        c.head_init_scale = head_init as f32;
+    }
     let lr = req.options.get_f64("kernel_lr").unwrap_or(1e-3);
     if !(lr > 0.0 && lr <= 1.0) {
         return Err(StageError::Options(format!(

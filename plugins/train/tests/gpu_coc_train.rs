@@ -376,7 +376,7 @@ fn schedule_run(
     add_points_at: u32,
 ) -> Vec<(u32, f64, u32)> {
     let ctx = gpu().expect("checked by the caller");
-    let mut coc = CocTrainConfig::new(CocVariant::Code);
+    let mut coc = CocTrainConfig::new(CocVariant::Lens);
     coc.blur_start = BLUR_START;
     coc.composite_start = COMPOSITE_START;
     coc.compositor_channels = 8;
@@ -419,18 +419,21 @@ const ADD_POINTS_AT: u32 = 150;
 const SCHEDULE_CHECKPOINTS: [u32; 5] = [95, 145, 195, 445, 600];
 
 /// CoCoGaussian's shortened schedule (deblur preset: no opacity reset, depth-weighted
-/// pruning) crossing SH growth, densification, the blur start, the point addition, the
-/// compositor start and the end of densification: the sharp held-out PSNR must not collapse
-/// (fall more than `DROP_DB`, the train log's collapse mark) below its best earlier
-/// checkpoint. It does not hold reliably today, so it is kept out of CI and run by hand.
+/// pruning; the default lens variant) crossing SH growth, densification, the blur start, the
+/// point addition, the compositor start and the end of densification: the sharp held-out PSNR
+/// must not collapse (fall more than `DROP_DB`, the train log's collapse mark) below its best
+/// earlier checkpoint, and must end `GAIN_DB` above the warm-up's (the CoC sets must sharpen
+/// the base, not merely not ruin it).
 /// Measured on lavapipe over four runs of the same seed (GPU sums in another order each run):
-/// 22.00 → 21.4 (blur start) → 21.4–21.7 (point addition) → 18.8–21.4 (densification) →
-/// 18.9–21.3 dB at the end: falls of 0.6–3.3 dB; one run without the point addition ended at
-/// 20.0 dB. The base Gaussians lose sharpness while densification grows the set under the CoC
-/// composite (issue 12).
+/// 22.0 dB (95, warm-up) → 23.4 (145, after the blur start) → 23.3–23.9 (195, after the point
+/// addition) → 26.1–28.0 (445, end of densification) → 28.0–29.9 (600), no fall anywhere. The
+/// code variant on the same schedule fell 0.6–3.3 dB under densification and ended at
+/// 18.9–21.3 dB, below its warm-up, which the gain check refuses. Plain 3DGS on the same
+/// schedule ends at 35.0–36.9 dB (two runs): here the lens does not find the focus (every
+/// view's, near- and far-focused alike, ends at 2.7–2.9 between the layers at 1.6 and 3.6;
+/// 2.2–2.5 from the depth-from-defocus start or with 10× the kernel learning rate), so this
+/// checks the schedule, not the gain over 3DGS (issue 12).
 #[test]
-#[ignore = "fails in about 1 of 4 runs: the sharp held-out PSNR falls 0.6–3.3 dB while \
-            densification runs under the CoC composite (issue 12). Run with --ignored."]
 fn cocog_holds_its_quality_across_every_schedule_event() {
     if gpu().is_none() {
         return;
@@ -451,7 +454,16 @@ fn cocog_holds_its_quality_across_every_schedule_event() {
         );
         best = best.max(psnr);
     }
+    let (warm, end) = (run[0].1, run[run.len() - 1].1);
+    assert!(
+        end >= warm + GAIN_DB,
+        "held-out PSNR ended at {end:.2} dB, less than {GAIN_DB} dB above the warm-up's \
+         {warm:.2} dB: {run:.2?}"
+    );
 }
+
+/// Below the smallest measured gain (+6.0 dB over four runs), with room for GPU summation order.
+const GAIN_DB: f64 = 4.0;
 
 /// The trainer's point addition: at its iteration the set grows by the candidates near the
 /// Gaussians, every Gaussian restarts round with opacity 0.1 (checked on the parameters read
