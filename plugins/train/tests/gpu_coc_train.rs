@@ -267,6 +267,29 @@ fn cocog_fits_the_blurred_photos_that_3dgs_cannot() {
     );
 }
 
+/// `iterations` steps on a fixed Gaussian set (no densification, SH 0), a reading every step.
+fn fixed_set_run(iterations: u32, coc: Option<CocTrainConfig>) -> TrainConfig {
+    TrainConfig {
+        iterations,
+        max_sh_degree: 0,
+        seed: 3,
+        loss_every: 1,
+        densify: None,
+        coc,
+        ..TrainConfig::default()
+    }
+}
+
+/// The paper variant through its CoC sets from the first step, with h_θ, F and the focus
+/// distances frozen at their start.
+fn frozen_paper() -> CocTrainConfig {
+    let mut coc = CocTrainConfig::new(CocVariant::Paper);
+    coc.blur_start = 1;
+    coc.kernel_lr_init = 1e-30;
+    coc.kernel_lr_final = 1e-30;
+    coc
+}
+
 /// The paper variant's aperture K starts narrow: from the true scene, with h_θ at its default
 /// init and frozen, the first steps through the M + 1 sets fit the blurred photos within
 /// `10 dB` of the sharp Gaussians instead of scattering the copies. Measured: 33.68 dB against
@@ -280,19 +303,8 @@ fn the_paper_aperture_starts_narrow() {
     let ctx = gpu().unwrap();
     let mut rng = SplitMix64::new(8);
     let scene = defocus_scene(&mut rng);
-    let config = |coc| TrainConfig {
-        iterations: 8,
-        max_sh_degree: 0,
-        seed: 3,
-        loss_every: 1,
-        densify: None,
-        coc,
-        ..TrainConfig::default()
-    };
-    let mut coc = CocTrainConfig::new(CocVariant::Paper);
-    coc.blur_start = 1;
-    coc.kernel_lr_init = 1e-30;
-    coc.kernel_lr_final = 1e-30;
+    let config = |coc| fixed_set_run(8, coc);
+    let coc = frozen_paper();
     let fit = |coc: Option<CocTrainConfig>| {
         let mut t = Trainer::new(ctx, &scene.truth, &scene.train, config(coc)).unwrap();
         let mut r = Vec::new();
@@ -331,22 +343,11 @@ fn a_cocog_step_with_zero_heads_is_a_3dgs_step() {
     for v in init.sh.iter_mut().chain(&mut init.opacity_logits) {
         *v = (rng.next_f64() * 2.0 - 1.0) as f32;
     }
-    let config = |coc| TrainConfig {
-        iterations: 3,
-        max_sh_degree: 0,
-        seed: 3,
-        loss_every: 1,
-        densify: None,
-        coc,
-        ..TrainConfig::default()
-    };
-    let mut coc = CocTrainConfig::new(CocVariant::Paper);
-    coc.blur_start = 1;
+    let config = |coc| fixed_set_run(3, coc);
+    let mut coc = frozen_paper();
     coc.composite_start = 100;
+    // Frozen h_θ with zero heads: every step's sets are exact copies of the base.
     coc.head_init_scale = 0.0;
-    // Frozen h_θ: its heads stay zero, so every step's sets are exact copies of the base.
-    coc.kernel_lr_init = 1e-30;
-    coc.kernel_lr_final = 1e-30;
     let mut plain = Trainer::new(ctx, &init, &scene.train, config(None)).unwrap();
     let mut cocog = Trainer::new(ctx, &init, &scene.train, config(Some(coc))).unwrap();
     for _ in 0..3 {
