@@ -291,8 +291,9 @@ pub struct TrainArgs {
     /// aperture and focus distance, h_θ shapes the copies inside it; copies centred on their
     /// base, heads started at 0.01, h_θ from 1000 with the renders averaged, F from 6000),
     /// `code` (the released code: free offsets gated by |1/d - 1/d_F|, h_θ and F from 1500)
-    /// or `paper` (aperture K, scaling β, directions from h_θ; h_θ from 2000, F from 6000). Default lens: on both dev scenes it learns the focus and beats
-    /// 3dgs where code fell behind (BENCHMARKS.md).
+    /// or `paper` (aperture K, scaling β, directions from h_θ; h_θ from 2000, F from 6000).
+    /// Default lens: on both dev scenes it learns the focus and beats 3dgs where code fell
+    /// behind (BENCHMARKS.md).
     #[arg(long = "coc-variant")]
     pub coc_variant: Option<String>,
     /// cocog: first iteration rendered through the CoC Gaussians (plain 3DGS before).
