@@ -7,7 +7,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use cocog_tests::{cocog, path_str, shared_dir, stderr, stdout};
+use cocog_tests::{cocog, cocog_bin, path_str, shared_dir, stderr, stdout};
 use nalgebra::{Matrix3, Vector3};
 use serde_json::Value;
 
@@ -159,6 +159,11 @@ fn compare(scene: &Path, dataset: &Path) -> PoseError {
 }
 
 fn ingest(dataset: &Path, out: &Path, extra: &[&str]) -> Value {
+    ingest_in(dataset, out, extra, None)
+}
+
+/// `ingest`, with the child's `TMPDIR` pointed at `tmp` where given.
+fn ingest_in(dataset: &Path, out: &Path, extra: &[&str], tmp: Option<&Path>) -> Value {
     let mut args = vec![
         "ingest",
         "photos",
@@ -168,7 +173,15 @@ fn ingest(dataset: &Path, out: &Path, extra: &[&str]) -> Value {
         "--json",
     ];
     args.extend_from_slice(extra);
-    let o = cocog(&args);
+    let o = match tmp {
+        None => cocog(&args),
+        Some(tmp) => Command::new(cocog_bin())
+            .args(&args)
+            .env("TMPDIR", tmp)
+            .env_remove("COCOG_PLUGIN_PATH")
+            .output()
+            .expect("run cocog"),
+    };
     assert!(
         o.status.success(),
         "ingest photos {}: {}",
@@ -251,7 +264,15 @@ fn a_folder_of_photos_trains_without_a_test_split() {
         std::fs::copy(&p, photos.join(p.file_name().unwrap())).unwrap();
     }
     let p = |name: &str| work.path().join(name);
-    let summary = ingest(&photos, &p("s"), &["--hold", "0"]);
+    // COLMAP's glog writes a file per command into $TMPDIR unless told to log to stderr.
+    let tmp = p("tmp");
+    std::fs::create_dir(&tmp).unwrap();
+    let summary = ingest_in(&photos, &p("s"), &["--hold", "0"], Some(&tmp));
+    assert_eq!(
+        cocog_tests::listing(&tmp),
+        Vec::<String>::new(),
+        "ingest left files in TMPDIR"
+    );
     assert_eq!(summary["test"], 0, "{summary}");
     assert_eq!(summary["train"], 24, "{summary}");
     let run = |args: &[&str]| {

@@ -139,6 +139,11 @@ impl Colmap {
                 ));
             }
         }
+        // Otherwise glog also writes a log file per command into $TMPDIR (or /tmp) that nothing
+        // removes: hundreds after a few ingests. On stderr its lines land in our log instead.
+        if self.accepts(args.command, "log_to_stderr")? {
+            cmd.arg("--log_to_stderr").arg("1");
+        }
         let mut log = File::options()
             .create(true)
             .append(true)
