@@ -202,6 +202,13 @@ pub struct PhotosArgs {
     /// orbit the scene; the default suits forward-facing captures (2°).
     #[arg(long = "orbit")]
     pub orbit: bool,
+    /// photos: let COLMAP's mapper refine the focal length from the first image pair on (its
+    /// own behaviour). By default it is held at the prior (EXIF, else 1.2 × the longer side)
+    /// until every photo is in, then refined with the distortion in one bundle adjustment: far
+    /// more reliable on narrow, defocused captures; if that registers too few photos, the free
+    /// mapping is tried as well.
+    #[arg(long = "free-intrinsics")]
+    pub free_intrinsics: bool,
     /// photos: let COLMAP use GPU SIFT (a CUDA build of COLMAP).
     #[arg(long = "colmap-gpu")]
     pub colmap_gpu: bool,

@@ -66,6 +66,7 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
                 "max-ratio" => p.max_ratio, "guided-matching" => p.guided_matching.then_some(true),
                 "gpu" => p.colmap_gpu.then_some(true), "min-registered" => p.min_registered,
                 "narrow-baseline" => p.orbit.then_some(false),
+                "free-intrinsics" => p.free_intrinsics.then_some(true),
             };
             if let (false, Some(key)) = (name == "ingest-photos", photos.keys().next()) {
                 let flag = match key.as_str() {

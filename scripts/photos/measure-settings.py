@@ -4,18 +4,21 @@ rotation and centre error after a similarity alignment to transforms.json, 3D po
 
     scripts/photos/measure-settings.py COCOG_BIN ../shared/bench [name=ARGS ...]
 
-Each setting is `name="--flag value ..."`; with none given, a built-in matrix runs. Results are
-printed as a Markdown table (BENCHMARKS.md, "ingest photos").
+Each setting is `name="--flag value ..."`; with none given, a built-in matrix runs. REPEAT=N
+runs each N times (COLMAP's multi-threaded matching makes runs differ); SCENES=a,b picks
+scenes. Results are printed as a Markdown table (BENCHMARKS.md, "ingest photos").
 """
-import json, shlex, subprocess, sys, tempfile, time
+import json, os, shlex, subprocess, sys, tempfile, time
 from pathlib import Path
 
 import numpy as np
 
-SCENES = ["defocus-dev/dev-table", "defocus-dev/dev-shelf", "sharp-dev"]
+SCENES = os.environ.get("SCENES", "defocus-dev/dev-table,defocus-dev/dev-shelf,sharp-dev").split(",")
+REPEAT = int(os.environ.get("REPEAT", "1"))
 MATRIX = {
     "COLMAP defaults": "--no-dsp",
-    "cocog defaults (DSP)": "",
+    "cocog defaults (DSP, focal length held while mapping)": "",
+    "DSP, COLMAP's free intrinsics": "--free-intrinsics",
     "DSP, 16k features, ratio 0.9, guided": "--max-features 16384 --max-ratio 0.9 --guided-matching",
     "no DSP, ratio 0.9, guided": "--no-dsp --max-ratio 0.9 --guided-matching",
     "DSP, SIMPLE_PINHOLE": "--camera-model SIMPLE_PINHOLE",
@@ -83,7 +86,7 @@ def main():
     print("| setting | scene | registered | max rotation error (°) | max centre error (× spread) | points | focal (px) | undistorted | seconds |")
     print("|---|---|---|---|---|---|---|---|---|")
     for name, args in matrix.items():
-        for scene in SCENES:
+        for scene in [s for s in SCENES for _ in range(REPEAT)]:
             m = measure(cocog, bench / scene, args)
             if "error" in m:
                 print(f"| {name} | {scene} | failed: {m['error']} | | | | | | {m['secs']:.0f} |", flush=True)

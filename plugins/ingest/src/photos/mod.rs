@@ -1,10 +1,12 @@
 //! `ingest-photos`: a folder of photos in, a scene out, by running COLMAP (feature extraction,
-//! matching, mapping, and undistortion where the lens needs it) in `colmap/` inside the output.
+//! matching, mapping with the lens held, a bundle adjustment that refines the lens, and
+//! undistortion where the lens needs it) in `colmap/` inside the output.
 //! COLMAP's log is kept there, its progress is relayed, and every photo that did not make it
 //! into the scene is reported with COLMAP's reason.
 
 mod colmap;
 mod database;
+mod mapping;
 mod model;
 mod settings;
 
@@ -60,8 +62,7 @@ pub(crate) fn run(
         )));
     }
     let work = req.output.join("colmap");
-    let sparse = work.join("sparse");
-    std::fs::create_dir_all(&sparse).map_err(|e| StageError::io(&sparse, e))?;
+    std::fs::create_dir_all(&work).map_err(|e| StageError::io(&work, e))?;
     let kept_log = work.join("colmap.log");
     let log = s.log.clone().unwrap_or_else(|| kept_log.clone());
     let cm = Colmap::find(s.colmap.as_deref(), log.clone())?;
@@ -107,23 +108,18 @@ pub(crate) fn run(
         m = m.arg("VocabTreeMatching.vocab_tree_path", tree.display());
     }
     cm.run(m, "match features", ctx)?;
-    let mut mapper = Args::new("mapper")
-        .arg("database_path", db.display())
-        .arg("image_path", photos.display())
-        .arg("output_path", sparse.display())
-        .total(n);
-    if s.narrow_baseline {
-        // COLMAP's 16° initial pair and 1.5° point angles assume orbits; forward-facing rigs
-        // see a few degrees at most, and then the mapper starts from a poor pair or stalls.
-        mapper = mapper
-            .tune("Mapper.init_min_tri_angle", 2)
-            .tune("Mapper.tri_min_angle", 0.5)
-            .tune("Mapper.filter_min_tri_angle", 0.5);
-    }
-    cm.run(mapper, "map", ctx)?;
+    let need = s.min_registered.unwrap_or_else(|| (n.div_ceil(2)).max(3));
+    let mapper = mapping::Mapper {
+        cm: &cm,
+        settings: &s,
+        db: &db,
+        photos: &photos,
+        photos_n: n,
+        ctx,
+    };
+    let (mut models, intrinsics) = mapper.map(&work, need)?;
 
     let evidence = database::read(&db)?;
-    let mut models = model::read_models(&sparse)?;
     let all: Vec<String> = evidence.keys().cloned().collect();
     if models.is_empty() {
         let reasons = all
@@ -140,7 +136,7 @@ pub(crate) fn run(
             log.display()
         )));
     }
-    let kept = models.remove(0);
+    let mut kept = models.remove(0);
     let kept_names: HashSet<String> = kept.model.images.iter().map(|i| i.name.clone()).collect();
     let elsewhere: HashSet<String> = models
         .iter()
@@ -159,7 +155,6 @@ pub(crate) fn run(
         .map(|(n, why)| format!("  {n}: {why}"))
         .collect::<Vec<_>>()
         .join("\n");
-    let need = s.min_registered.unwrap_or_else(|| (n.div_ceil(2)).max(3));
     if kept_names.len() < need {
         return Err(StageError::Input(format!(
             "COLMAP registered {} of {n} photos in its largest model; at least {need} are needed \
@@ -183,6 +178,9 @@ pub(crate) fn run(
         ));
     }
 
+    if intrinsics == mapping::Intrinsics::HeldThenRefined {
+        mapping::refine(&cm, &mut kept, &work, ctx)?;
+    }
     let mut mapped = kept.model;
     let (distortion, undistort) = model::drop_small_distortion(&mut mapped);
     let (final_model, final_dir, images) = if undistort {
@@ -218,6 +216,7 @@ pub(crate) fn run(
         "not_registered": dropped.iter().map(|(n, why)| json!({"image": n, "reason": why}))
             .collect::<Vec<_>>(),
         "camera_model": s.camera_model,
+        "intrinsics": intrinsics.describe(),
         "cameras": final_model.cameras.len(),
         "focal_px": focal,
         "focal_from_exif": exif,

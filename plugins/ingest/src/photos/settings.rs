@@ -67,6 +67,7 @@ pub(crate) struct PhotoSettings {
     pub guided: bool,
     pub gpu: bool,
     pub narrow_baseline: bool,
+    pub free_intrinsics: bool,
     pub min_registered: Option<usize>,
     pub log: Option<PathBuf>,
 }
@@ -134,6 +135,14 @@ pub(crate) fn options() -> Vec<OptionSpec> {
             NARROW_BASELINE,
             "map with triangulation angles suited to forward-facing captures (cameras a few \
              cm apart): start from pairs at 2° instead of 16°, keep points seen at 0.5°",
+        ),
+        OptionSpec::bool(
+            "free-intrinsics",
+            false,
+            "let COLMAP's mapper refine the focal length from the first pair on (its own \
+             behaviour) instead of holding it at the prior (EXIF, else 1.2 × the longer side) \
+             until every photo is in and refining it with the distortion in one final bundle \
+             adjustment; held is far more reliable on narrow, defocused captures",
         ),
         OptionSpec::bool(
             "gpu",
@@ -221,6 +230,7 @@ impl PhotoSettings {
             guided: o.get_bool("guided-matching").unwrap_or(GUIDED),
             gpu: o.get_bool("gpu").unwrap_or(false),
             narrow_baseline: o.get_bool("narrow-baseline").unwrap_or(NARROW_BASELINE),
+            free_intrinsics: o.get_bool("free-intrinsics").unwrap_or(false),
             min_registered,
             log: o.get_path("log"),
         })
