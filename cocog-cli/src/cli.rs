@@ -209,6 +209,12 @@ pub struct PhotosArgs {
     /// mapping is tried as well.
     #[arg(long = "free-intrinsics")]
     pub free_intrinsics: bool,
+    /// photos: the focal length prior for photos without EXIF, as a multiple of the longer side.
+    /// Default COLMAP's 1.2 (about a 43 mm lens on full frame); a phone's main camera is about
+    /// 0.8, a 50 mm lens on full frame 1.39. The mapper holds the focal length at its prior
+    /// until the final bundle adjustment, so a prior far off costs accuracy (BENCHMARKS.md).
+    #[arg(long = "focal-factor", value_name = "F", value_parser = finite)]
+    pub focal_factor: Option<f64>,
     /// photos: let COLMAP use GPU SIFT (a CUDA build of COLMAP).
     #[arg(long = "colmap-gpu")]
     pub colmap_gpu: bool,

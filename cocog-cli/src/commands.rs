@@ -67,6 +67,7 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
                 "gpu" => p.colmap_gpu.then_some(true), "min-registered" => p.min_registered,
                 "narrow-baseline" => p.orbit.then_some(false),
                 "free-intrinsics" => p.free_intrinsics.then_some(true),
+                "focal-factor" => p.focal_factor,
             };
             if let (false, Some(key)) = (name == "ingest-photos", photos.keys().next()) {
                 let flag = match key.as_str() {

@@ -211,6 +211,8 @@ fn check_dataset(
     let work = tempfile::tempdir().unwrap();
     let out = work.path().join("s");
     let summary = ingest(dataset, &out, &[]);
+    // PNG renders carry no EXIF: COLMAP's default prior, 1.2 × the longer side (400 px).
+    assert_eq!(summary["colmap"]["focal_prior_px"], 480.0, "{summary}");
     let e = compare(&out, dataset);
     eprintln!(
         "{scene}: {} · max rotation error {:.4}° · max centre error {:.4} of the spread ({:.4} m)",
@@ -353,7 +355,14 @@ fn a_folder_of_photos_trains_without_a_test_split() {
     // COLMAP's glog writes a file per command into $TMPDIR unless told to log to stderr.
     let tmp = p("tmp");
     std::fs::create_dir(&tmp).unwrap();
-    let summary = ingest_in(&photos, &p("s"), &["--hold", "0"], Some(&tmp));
+    let summary = ingest_in(
+        &photos,
+        &p("s"),
+        &["--hold", "0", "--focal-factor", "0.97"],
+        Some(&tmp),
+    );
+    let prior = summary["colmap"]["focal_prior_px"].as_f64().unwrap();
+    assert!((prior - 0.97 * 400.0).abs() < 1e-6, "{summary}");
     assert_eq!(
         cocog_tests::listing(&tmp),
         Vec::<String>::new(),
@@ -462,4 +471,36 @@ fn photos_that_do_not_register_are_named_with_the_reason() {
         work.path().join("s.colmap.log").is_file(),
         "the log survives the failure"
     );
+}
+
+/// A focal-length factor outside what any lens has is refused by name before COLMAP runs.
+#[test]
+fn a_bad_focal_factor_is_refused() {
+    let work = tempfile::tempdir().unwrap();
+    let out = work.path().join("s");
+    // (value, exit status, text): the stage's range check, or the CLI's for a non-number.
+    let cases = [
+        ("0", 1, "0.1 to 10"),
+        ("-1", 1, "0.1 to 10"),
+        ("50", 1, "0.1 to 10"),
+        ("nan", 2, "not a finite number"),
+    ];
+    for (bad, code, why) in cases {
+        let flag = format!("--focal-factor={bad}");
+        let o = cocog(&[
+            "ingest",
+            "photos",
+            path_str(work.path()),
+            "-o",
+            path_str(&out),
+            &flag,
+        ]);
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(code), "{bad}: {err}");
+        assert!(
+            err.contains("focal-factor") && err.contains(why),
+            "{bad}: {err}"
+        );
+        assert!(!out.exists());
+    }
 }

@@ -6,7 +6,7 @@ use std::collections::{BTreeMap, HashSet};
 use std::path::Path;
 
 use cocog_pipeline::StageError;
-use rusqlite::{Connection, OpenFlags};
+use rusqlite::{Connection, OpenFlags, OptionalExtension};
 
 /// COLMAP packs an image pair into one integer: `id1 * MAX_IMAGE_ID + id2` with id1 < id2.
 const MAX_IMAGE_ID: i64 = 2_147_483_647;
@@ -113,4 +113,26 @@ pub(crate) fn reason(
         e.features,
         usable.len()
     )
+}
+
+/// The focal length the first camera starts from (EXIF, else the default factor × the longer
+/// side): the mapper holds it, so the summary reports it. `None` for an empty table.
+pub(crate) fn focal_prior(db: &Path) -> Result<Option<f64>, StageError> {
+    let fail = |e: rusqlite::Error| {
+        StageError::Input(format!("{}: reading COLMAP's cameras: {e}", db.display()))
+    };
+    let conn = Connection::open_with_flags(db, OpenFlags::SQLITE_OPEN_READ_WRITE).map_err(fail)?;
+    let params: Option<Vec<u8>> = conn
+        .query_row(
+            "SELECT params FROM cameras ORDER BY camera_id LIMIT 1",
+            [],
+            |r| r.get(0),
+        )
+        .optional()
+        .map_err(fail)?;
+    // Every COLMAP camera model stores its (first) focal length as the first little-endian f64.
+    Ok(params.and_then(|p| {
+        p.get(..8)
+            .map(|b| f64::from_le_bytes(b.try_into().expect("8 bytes")))
+    }))
 }

@@ -79,19 +79,19 @@ pub(crate) fn run(
     ));
     let db = work.join("database.db");
     let gpu = u8::from(s.gpu);
-    cm.run(
-        Args::new("feature_extractor")
-            .arg("database_path", db.display())
-            .arg("image_path", photos.display())
-            .arg("ImageReader.camera_model", &s.camera_model)
-            .arg("ImageReader.single_camera", u8::from(!s.camera_per_image))
-            .tune("SiftExtraction.use_gpu", gpu)
-            .tune("FeatureExtraction.use_gpu", gpu)
-            .tune("SiftExtraction.max_num_features", s.max_features)
-            .tune("SiftExtraction.domain_size_pooling", u8::from(s.dsp)),
-        "extract features",
-        ctx,
-    )?;
+    let mut extract = Args::new("feature_extractor")
+        .arg("database_path", db.display())
+        .arg("image_path", photos.display())
+        .arg("ImageReader.camera_model", &s.camera_model)
+        .arg("ImageReader.single_camera", u8::from(!s.camera_per_image))
+        .tune("SiftExtraction.use_gpu", gpu)
+        .tune("FeatureExtraction.use_gpu", gpu)
+        .tune("SiftExtraction.max_num_features", s.max_features)
+        .tune("SiftExtraction.domain_size_pooling", u8::from(s.dsp));
+    if let Some(f) = s.focal_factor {
+        extract = extract.arg("ImageReader.default_focal_length_factor", f);
+    }
+    cm.run(extract, "extract features", ctx)?;
     let exif = colmap::tail(&log, usize::MAX)
         .lines()
         .filter(|l| l.contains("Focal Length:") && l.contains("(Prior)"))
@@ -120,6 +120,7 @@ pub(crate) fn run(
     let (mut models, intrinsics) = mapper.map(&work, need)?;
 
     let evidence = database::read(&db)?;
+    let focal_prior = database::focal_prior(&db)?;
     let all: Vec<String> = evidence.keys().cloned().collect();
     if models.is_empty() {
         let reasons = all
@@ -220,6 +221,7 @@ pub(crate) fn run(
         "cameras": final_model.cameras.len(),
         "focal_px": focal,
         "focal_from_exif": exif,
+        "focal_prior_px": focal_prior,
         "distortion_px": distortion,
         "undistorted": undistort,
         "log": "colmap/colmap.log",

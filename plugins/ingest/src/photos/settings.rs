@@ -68,6 +68,7 @@ pub(crate) struct PhotoSettings {
     pub gpu: bool,
     pub narrow_baseline: bool,
     pub free_intrinsics: bool,
+    pub focal_factor: Option<f64>,
     pub min_registered: Option<usize>,
     pub log: Option<PathBuf>,
 }
@@ -144,6 +145,13 @@ pub(crate) fn options() -> Vec<OptionSpec> {
              until every photo is in and refining it with the distortion in one final bundle \
              adjustment; held is far more reliable on narrow, defocused captures",
         ),
+        OptionSpec::optional(
+            "focal-factor",
+            OptionKind::Float,
+            "focal length prior for photos without EXIF, × the longer side (COLMAP's default \
+             1.2 ≈ a 43 mm lens on full frame; a phone's main camera ≈ 0.8). The mapper holds \
+             the focal length at its prior, so a prior far off costs accuracy",
+        ),
         OptionSpec::bool(
             "gpu",
             false,
@@ -218,6 +226,14 @@ impl PhotoSettings {
                     as usize,
             ),
         };
+        let focal_factor = match o.get("focal-factor") {
+            None | Some(Value::Null) => None,
+            Some(v) => Some(
+                v.as_f64()
+                    .filter(|f| f.is_finite() && (0.1..=10.0).contains(f))
+                    .ok_or_else(|| bad("focal-factor", "a number from 0.1 to 10", v))?,
+            ),
+        };
         Ok(Self {
             colmap: o.get_path("colmap"),
             matcher,
@@ -231,6 +247,7 @@ impl PhotoSettings {
             gpu: o.get_bool("gpu").unwrap_or(false),
             narrow_baseline: o.get_bool("narrow-baseline").unwrap_or(NARROW_BASELINE),
             free_intrinsics: o.get_bool("free-intrinsics").unwrap_or(false),
+            focal_factor,
             min_registered,
             log: o.get_path("log"),
         })
