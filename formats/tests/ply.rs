@@ -334,27 +334,3 @@ PlyData([PlyElement.describe(arr, 'vertex')]).write(sys.argv[2])
         (vec![1.0, 2.0, 3.0], vec![255, 128, 0])
     );
 }
-
-/// Throughput of 1M degree-3 splats; run with `--ignored --nocapture` and report the numbers.
-#[test]
-#[ignore]
-fn speed_one_million_splats() {
-    let s = random_splats(1_000_000, 3, 1);
-    let dir = tempfile::tempdir().unwrap();
-    let p = dir.path().join("big.ply");
-    let t = std::time::Instant::now();
-    write_splats(&p, &s, None).unwrap();
-    let w = t.elapsed();
-    let t = std::time::Instant::now();
-    let back = read_splats(&p).unwrap();
-    let r = t.elapsed();
-    let mb = std::fs::metadata(&p).unwrap().len() as f64 / 1e6;
-    assert_eq!(back.len(), s.len());
-    eprintln!(
-        "1M splats D3 ({mb:.0} MB): write {:.2} s ({:.0} MB/s), read {:.2} s ({:.0} MB/s)",
-        w.as_secs_f64(),
-        mb / w.as_secs_f64(),
-        r.as_secs_f64(),
-        mb / r.as_secs_f64()
-    );
-}
