@@ -29,7 +29,7 @@ pub enum RunError {
         #[source]
         source: std::io::Error,
     },
-    #[error("stage '{stage}' failed: {source}")]
+    #[error("{}", stage_failure(.stage, .source))]
     Stage {
         stage: String,
         #[source]
@@ -49,6 +49,17 @@ pub enum RunError {
     Registry(#[from] RegistryError),
     #[error("{path}: {message}")]
     Pipeline { path: PathBuf, message: String },
+}
+
+/// "stage 'X' failed: …", unless the stage's message already names the stage (option errors
+/// do), where the prefix would only repeat it.
+fn stage_failure(stage: &str, source: &StageError) -> String {
+    let message = source.to_string();
+    if message.starts_with(&format!("stage '{stage}'")) {
+        message
+    } else {
+        format!("stage '{stage}' failed: {message}")
+    }
 }
 
 impl RunError {
@@ -246,4 +257,37 @@ fn record_history(
         finished_at,
     });
     scene.save(dir)
+}
+
+#[cfg(test)]
+mod stage_failure_tests {
+    use super::{RunError, StageError};
+
+    #[test]
+    fn a_message_that_names_its_stage_is_not_prefixed_again() {
+        let options = RunError::Stage {
+            stage: "ingest-photos".into(),
+            source: StageError::Options(
+                "stage 'ingest-photos' option 'focal-factor': expected a number, got 0".into(),
+            ),
+        };
+        assert_eq!(
+            options.to_string(),
+            "stage 'ingest-photos' option 'focal-factor': expected a number, got 0"
+        );
+        let input = RunError::Stage {
+            stage: "ingest-photos".into(),
+            source: StageError::Input("photos/: found 0 photos".into()),
+        };
+        assert_eq!(
+            input.to_string(),
+            "stage 'ingest-photos' failed: photos/: found 0 photos"
+        );
+        // Another stage's name at the start is not this stage's: keep the prefix.
+        let other = RunError::Stage {
+            stage: "train".into(),
+            source: StageError::Options("stage 'trainer' option 'x': bad".into()),
+        };
+        assert!(other.to_string().starts_with("stage 'train' failed: "));
+    }
 }
