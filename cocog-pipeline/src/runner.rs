@@ -263,31 +263,33 @@ fn record_history(
 mod stage_failure_tests {
     use super::{RunError, StageError};
 
+    fn shown(stage: &str, source: StageError) -> String {
+        RunError::Stage {
+            stage: stage.into(),
+            source,
+        }
+        .to_string()
+    }
+
     #[test]
     fn a_message_that_names_its_stage_is_not_prefixed_again() {
-        let options = RunError::Stage {
-            stage: "ingest-photos".into(),
-            source: StageError::Options(
-                "stage 'ingest-photos' option 'focal-factor': expected a number, got 0".into(),
-            ),
-        };
+        let options = "stage 'ingest-photos' option 'focal-factor': expected a number, got 0";
         assert_eq!(
-            options.to_string(),
-            "stage 'ingest-photos' option 'focal-factor': expected a number, got 0"
+            shown("ingest-photos", StageError::Options(options.into())),
+            options
         );
-        let input = RunError::Stage {
-            stage: "ingest-photos".into(),
-            source: StageError::Input("photos/: found 0 photos".into()),
-        };
         assert_eq!(
-            input.to_string(),
+            shown(
+                "ingest-photos",
+                StageError::Input("photos/: found 0 photos".into())
+            ),
             "stage 'ingest-photos' failed: photos/: found 0 photos"
         );
         // Another stage's name at the start is not this stage's: keep the prefix.
-        let other = RunError::Stage {
-            stage: "train".into(),
-            source: StageError::Options("stage 'trainer' option 'x': bad".into()),
-        };
-        assert!(other.to_string().starts_with("stage 'train' failed: "));
+        let other = shown(
+            "train",
+            StageError::Options("stage 'trainer' option 'x': bad".into()),
+        );
+        assert!(other.starts_with("stage 'train' failed: "));
     }
 }

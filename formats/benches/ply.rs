@@ -8,6 +8,7 @@
 use std::time::Instant;
 
 use cocog_formats::ply::{read_splats, write_splats};
+use cocog_formats::rng::SplitMix64;
 use cocog_formats::splats::{Splats, sh_rest_per_channel};
 
 fn env(name: &str, default: u64) -> u64 {
@@ -15,17 +16,6 @@ fn env(name: &str, default: u64) -> u64 {
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(default)
-}
-
-/// Xorshift values in [-2, 2): any finite numbers do; the format does not care.
-fn values(seed: u64) -> impl FnMut() -> f32 {
-    let mut s = seed.max(1);
-    move || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        (s >> 40) as f32 / (1u64 << 24) as f32 * 4.0 - 2.0
-    }
 }
 
 /// Peak resident memory of this process in MiB (`VmHWM`), where the OS reports it.
@@ -39,8 +29,13 @@ fn peak_rss_mib() -> Option<f64> {
 fn main() {
     let n = env("COCOG_BENCH_SPLATS", 1_000_000) as usize;
     let degree = env("COCOG_BENCH_SH", 3) as u32;
-    let mut r = values(1);
-    let mut v = |k: usize| (0..k).map(|_| r()).collect::<Vec<f32>>();
+    // Any finite numbers do: the format does not care.
+    let mut rng = SplitMix64::new(1);
+    let mut v = |k: usize| {
+        (0..k)
+            .map(|_| (rng.next_f64() * 4.0 - 2.0) as f32)
+            .collect::<Vec<f32>>()
+    };
     let splats = Splats {
         means: v(3 * n),
         log_scales: v(3 * n),

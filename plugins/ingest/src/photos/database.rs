@@ -21,13 +21,19 @@ pub(crate) struct ImageEvidence {
 }
 
 /// Per image name: features and verified pairs.
-pub(crate) fn read(db: &Path) -> Result<BTreeMap<String, ImageEvidence>, StageError> {
-    let fail = |e: rusqlite::Error| {
-        StageError::Input(format!("{}: reading COLMAP's database: {e}", db.display()))
-    };
+fn failed(db: &Path, e: rusqlite::Error) -> StageError {
+    StageError::Input(format!("{}: reading COLMAP's database: {e}", db.display()))
+}
+
+fn open(db: &Path) -> Result<Connection, StageError> {
     // Read-write although nothing is written: COLMAP's database is in WAL mode, where a
     // read-only connection leaves -wal/-shm files behind that only a writer removes on close.
-    let conn = Connection::open_with_flags(db, OpenFlags::SQLITE_OPEN_READ_WRITE).map_err(fail)?;
+    Connection::open_with_flags(db, OpenFlags::SQLITE_OPEN_READ_WRITE).map_err(|e| failed(db, e))
+}
+
+pub(crate) fn read(db: &Path) -> Result<BTreeMap<String, ImageEvidence>, StageError> {
+    let fail = |e| failed(db, e);
+    let conn = open(db)?;
     // Every query here yields (integer, value) rows.
     fn rows<T: rusqlite::types::FromSql>(
         conn: &Connection,
@@ -118,18 +124,14 @@ pub(crate) fn reason(
 /// The focal length the first camera starts from (EXIF, else the default factor × the longer
 /// side): the mapper holds it, so the summary reports it. `None` for an empty table.
 pub(crate) fn focal_prior(db: &Path) -> Result<Option<f64>, StageError> {
-    let fail = |e: rusqlite::Error| {
-        StageError::Input(format!("{}: reading COLMAP's cameras: {e}", db.display()))
-    };
-    let conn = Connection::open_with_flags(db, OpenFlags::SQLITE_OPEN_READ_WRITE).map_err(fail)?;
-    let params: Option<Vec<u8>> = conn
+    let params: Option<Vec<u8>> = open(db)?
         .query_row(
             "SELECT params FROM cameras ORDER BY camera_id LIMIT 1",
             [],
             |r| r.get(0),
         )
         .optional()
-        .map_err(fail)?;
+        .map_err(|e| failed(db, e))?;
     // Every COLMAP camera model stores its (first) focal length as the first little-endian f64.
     Ok(params.and_then(|p| {
         p.get(..8)
