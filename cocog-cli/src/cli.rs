@@ -337,6 +337,16 @@ pub struct TrainArgs {
     /// and demo datasets have it).
     #[arg(long = "focus-init", value_name = "mean|estimate|TRANSFORMS_JSON")]
     pub focus_init: Option<String>,
+    /// cocog, experimental: every N iterations after the blur start, estimate each photo's
+    /// focus again by depth from defocus against the current base Gaussians and replace the
+    /// learned one (the gradient alone moves a focus little from a wrong start). On a
+    /// two-plane test scene half the runs found both planes and half locked every photo onto
+    /// one (BENCHMARKS.md). Default 0 (never).
+    #[arg(long = "refocus-every", value_name = "N")]
+    pub refocus_every: Option<u64>,
+    /// cocog: the last iteration --refocus-every applies to. Default: the end of the run.
+    #[arg(long = "refocus-until", value_name = "IT")]
+    pub refocus_until: Option<u64>,
     /// Train on images downscaled by N (intrinsics scaled to match). Default 1.
     #[arg(long)]
     pub downscale: Option<u32>,

@@ -122,6 +122,7 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
                 "kernel_lr" => a.kernel_lr,
                 "focus_init" => a.focus_init.clone().filter(|f| !matches!(f.as_str(), "mean" | "estimate")),
                 "focus_estimate" => (a.focus_init.as_deref() == Some("estimate")).then_some(true),
+                "refocus_every" => a.refocus_every, "refocus_until" => a.refocus_until,
                 "sh_degree" => a.sh_degree,
                 "random_background" => a.random_background.then_some(true),
                 "background" => a.background.clone(),

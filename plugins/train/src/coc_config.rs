@@ -26,6 +26,11 @@ pub struct CocTrainConfig {
     /// defocus against the warm-up Gaussians (`focus_estimate.rs`) instead of the mean
     /// camera-to-Gaussian distance of both sources.
     pub estimate_focus: bool,
+    /// Every this many iterations after the blur start (0: never), and up to `refocus_until`,
+    /// each photo's focus is estimated again by depth from defocus against the current base
+    /// Gaussians and replaces the learned one: the gradient alone does not move a focus far.
+    pub refocus_every: u32,
+    pub refocus_until: u32,
     /// Multiplies the initial weights and biases of h_θ's heads (PyTorch's default: 1). Small
     /// values start the copies near their base instead of scattered by the untrained heads;
     /// 0 renders M + 1 exact copies of the base at first (what the wiring test compares with
@@ -54,6 +59,8 @@ impl CocTrainConfig {
             compositor_channels: 64,
             initial_focus: None,
             estimate_focus: false,
+            refocus_every: 0,
+            refocus_until: 0,
             head_init_scale,
         }
     }
@@ -75,6 +82,14 @@ impl CocTrainConfig {
 
     pub fn blurs_at(&self, it: u32) -> bool {
         it >= self.blur_start
+    }
+
+    /// Whether iteration `it` re-estimates the focus distances.
+    pub fn refocuses_at(&self, it: u32) -> bool {
+        self.refocus_every > 0
+            && it > self.blur_start
+            && it <= self.refocus_until
+            && (it - self.blur_start).is_multiple_of(self.refocus_every)
     }
 
     pub fn composites_at(&self, it: u32) -> bool {
@@ -100,6 +115,15 @@ mod tests {
         assert!(!c.blurs_at(1999) && c.blurs_at(2000));
         assert!(!c.composites_at(5999) && c.composites_at(6000));
         assert_eq!(c.net.copies, 5);
+    }
+
+    #[test]
+    fn refocusing_follows_its_interval_after_the_blur_start() {
+        let mut c = CocTrainConfig::new(CocVariant::Lens);
+        assert!(!(0..10_000).any(|it| c.refocuses_at(it)), "off by default");
+        (c.refocus_every, c.refocus_until) = (250, 2000);
+        let at: Vec<u32> = (0..10_000).filter(|&it| c.refocuses_at(it)).collect();
+        assert_eq!(at, [1250, 1500, 1750, 2000]);
     }
 
     #[test]

@@ -87,6 +87,19 @@ fn options() -> Vec<OptionSpec> {
              from defocus (the warm-up render blurred by a thin lens, fitted to the photo) \
              instead of the mean camera-to-Gaussian distance",
         ),
+        OptionSpec::int(
+            "refocus_every",
+            0,
+            "cocog, experimental: every N iterations after the blur start, estimate each \
+             photo's focus again by depth from defocus against the current base Gaussians and \
+             replace the learned one (0: never; the gradient alone moves a focus little, but \
+             on a two-plane test scene half the runs locked every photo onto one plane)",
+        ),
+        OptionSpec::int(
+            "refocus_until",
+            0,
+            "cocog: last iteration refocus_every applies to (0: the end of the run)",
+        ),
         OptionSpec::optional(
             "coc_head_init",
             OptionKind::Float,
@@ -239,6 +252,11 @@ fn coc_config(req: &StageRequest, iterations: u32) -> Result<Option<CocTrainConf
     c.kernel_lr_final *= lr / c.kernel_lr_init;
     c.kernel_lr_init = lr;
     c.estimate_focus = req.options.get_bool("focus_estimate").unwrap_or(false);
+    c.refocus_every = int(req, "refocus_every", 0, limit)? as u32;
+    c.refocus_until = match int(req, "refocus_until", 0, limit)? as u32 {
+        0 => iterations,
+        until => until,
+    };
     if c.blur_start > iterations {
         return Err(StageError::Options(format!(
             "stage 'train': blur_start {} is past the last iteration ({iterations}): the run \
@@ -494,6 +512,8 @@ impl Stage for Train {
                 "composite_start": c.composite_start,
                 "compositor_channels": c.compositor_channels,
                 "kernel_lr": [c.kernel_lr_init, c.kernel_lr_final],
+                "refocus_every": c.refocus_every,
+                "refocus_until": c.refocus_until,
             })) },
         }))
     }

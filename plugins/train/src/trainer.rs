@@ -451,6 +451,13 @@ impl<'c> Trainer<'c> {
                 c.config.initial_focus = Some(found);
             }
         }
+        let refocus = self
+            .coc
+            .as_ref()
+            .is_some_and(|c| c.focus.is_some() && c.config.refocuses_at(it));
+        if refocus {
+            self.refocus()?;
+        }
         let mut batch = self.batch.take().ok_or(TrainError::Poisoned)?;
         let result = self
             .aim(&mut batch, self.cameras[view], background)

@@ -414,17 +414,22 @@ fn a_cocog_step_with_zero_heads_is_a_3dgs_step() {
 }
 
 /// Held-out PSNR of the base Gaussians at the checkpoints of a shortened CoCoGaussian
-/// schedule crossing every event, and the Gaussian count there.
+/// schedule crossing every event, the Gaussian count there, and the learned focus distances
+/// at the end. `refocus_every` > 0 starts the focus by depth from defocus and estimates it
+/// again at that interval to the end.
 fn schedule_run(
     scene: &Defocus,
     init: &GaussianParams,
     add_points_at: u32,
-) -> Vec<(u32, f64, u32)> {
+    refocus_every: u32,
+) -> (Vec<(u32, f64, u32)>, Vec<f64>) {
     let ctx = gpu().expect("checked by the caller");
     let mut coc = CocTrainConfig::new(CocVariant::Lens);
     coc.blur_start = BLUR_START;
     coc.composite_start = COMPOSITE_START;
     coc.compositor_channels = 8;
+    coc.estimate_focus = refocus_every > 0;
+    (coc.refocus_every, coc.refocus_until) = (refocus_every, 600);
     let config = TrainConfig {
         iterations: 600,
         sh_degree_interval: 40,
@@ -453,7 +458,7 @@ fn schedule_run(
             out.push((it, psnr, trainer.num_gaussians()));
         }
     }
-    out
+    (out, trainer.focus_distances().unwrap())
 }
 
 const BLUR_START: u32 = 100;
@@ -486,7 +491,7 @@ fn cocog_holds_its_quality_across_every_schedule_event() {
     let mut rng = SplitMix64::new(21);
     let scene = defocus_scene(&mut rng);
     let init = noisy_init(&scene.truth, 1, &mut rng);
-    let run = schedule_run(&scene, &init, ADD_POINTS_AT);
+    let (run, _) = schedule_run(&scene, &init, ADD_POINTS_AT, 0);
     eprintln!("held-out PSNR and Gaussians at checkpoints: {run:.2?}");
     let (before, after) = (run[1].2, run[2].2);
     assert!(after > before, "the point addition added nothing: {run:?}");
@@ -509,6 +514,50 @@ fn cocog_holds_its_quality_across_every_schedule_event() {
 
 /// Below the smallest measured gain (+6.0 dB over four runs), with room for GPU summation order.
 const GAIN_DB: f64 = 4.0;
+
+/// The same scene and schedule with the focus estimated by depth from defocus at the blur
+/// start and again every 50 iterations (`--refocus-every 50`): the photos alternate between
+/// focus on the layer at 1.6 and on the one at 3.6 over a 6 cm baseline, where the gradient
+/// alone leaves every photo's focus at 2.7–2.9 (the test above). Refocused, every
+/// near-focused photo should end nearer than every far-focused one, and the base above what
+/// the gradient-only run ever reached (28.0–29.9 dB over five runs).
+/// Not in CI: it holds in 2 of 4 runs on lavapipe. Found both planes: 37.09 dB (focus
+/// 1.61–1.63 / 2.78–3.34) and 35.81 dB (1.62–1.68 / 3.41–3.45); locked every photo onto the
+/// near plane: 30.58 dB (1.63–1.74 for all eight), and one more failure whose figures were
+/// lost. Plain 3DGS: 35.0–36.9 dB; the true focus as the start: 37.71 dB. That is why
+/// refocusing is off by default (BENCHMARKS.md, issue 12).
+#[test]
+#[ignore = "bistable: 2 of 4 runs on lavapipe lock every photo onto one focus plane"]
+fn refocusing_finds_the_near_and_far_focus_of_the_photos() {
+    if gpu().is_none() {
+        return;
+    }
+    let mut rng = SplitMix64::new(21);
+    let scene = defocus_scene(&mut rng);
+    let init = noisy_init(&scene.truth, 1, &mut rng);
+    let (run, focus) = schedule_run(&scene, &init, ADD_POINTS_AT, 50);
+    eprintln!("held-out PSNR and Gaussians: {run:.2?}; focus {focus:.2?}");
+    let side = |want: f64| -> Vec<f64> {
+        (focus.iter().zip(&scene.focus))
+            .filter(|&(_, &t)| t == want)
+            .map(|(&f, _)| f)
+            .collect()
+    };
+    let (near, far) = (side(NEAR), side(FAR));
+    let nearest_far = far.iter().copied().fold(f64::MAX, f64::min);
+    assert!(
+        near.iter().all(|&d| d < nearest_far),
+        "near-focused photos at {near:.2?}, far-focused at {far:.2?}"
+    );
+    let end = run[run.len() - 1].1;
+    assert!(
+        end >= REFOCUSED_DB,
+        "held-out PSNR ended at {end:.2} dB, below {REFOCUSED_DB} dB: {run:.2?}"
+    );
+}
+
+/// Above the gradient-only runs' best (29.9 dB), below the runs that found both planes (35.8).
+const REFOCUSED_DB: f64 = 31.0;
 
 /// The trainer's point addition: at its iteration the set grows by the candidates near the
 /// Gaussians, every Gaussian restarts round with opacity 0.1 (checked on the parameters read

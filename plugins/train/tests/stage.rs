@@ -166,6 +166,15 @@ fn cocog_method_and_missing_points_are_clear_errors() {
         err.to_string().contains("unknown variant 'pinhole'"),
         "{err}"
     );
+    let err = run(
+        train.as_ref(),
+        tmp.path(),
+        &tmp.path().join("o1"),
+        json!({"method": "cocog", "refocus_every": -250}),
+    )
+    .unwrap_err();
+    assert!(matches!(err, StageError::Options(_)));
+    assert!(err.to_string().contains("'refocus_every'"), "{err}");
 
     let scene_dir = ingested(tmp.path());
     let mut scene = Scene::load(&scene_dir).unwrap();
@@ -501,7 +510,13 @@ fn estimated_focus_replaces_the_mean_distance_start() {
     let mut with = options.as_object().unwrap().clone();
     with.insert("focus_estimate".into(), json!(true));
     let estimated = tmp.path().join("estimated");
-    run(train.as_ref(), &scene_dir, &estimated, Value::Object(with)).unwrap();
+    let summary = run(train.as_ref(), &scene_dir, &estimated, Value::Object(with)).unwrap();
+    // Refocusing is off unless asked for; its last iteration resolves to the end of the run.
+    let coc = &summary["resolved"]["coc"];
+    assert_eq!(
+        (&coc["refocus_every"], &coc["refocus_until"]),
+        (&json!(0), &json!(301))
+    );
     let focus = |dir: &Path| -> Vec<f64> {
         let scene = Scene::load(dir).unwrap();
         scene

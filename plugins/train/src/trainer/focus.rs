@@ -42,3 +42,29 @@ impl<'c> Trainer<'c> {
         Ok(found)
     }
 }
+
+impl<'c> Trainer<'c> {
+    /// Replaces each training photo's learned focus distance by a fresh estimate against the
+    /// current base Gaussians (views without one keep theirs). The first Adam moment restarts
+    /// at 0 so the old direction does not carry the focus back; the second keeps the
+    /// gradient's scale.
+    pub(super) fn refocus(&mut self) -> Result<(), TrainError> {
+        let found = self.estimate_focus()?;
+        let ctx = self.ctx;
+        let Some(focus) = self.coc.as_ref().and_then(|c| c.focus.as_ref()) else {
+            return Ok(());
+        };
+        for (v, d) in found.iter().enumerate() {
+            if !(d.is_finite() && *d > 0.0) {
+                continue;
+            }
+            let at = (v * std::mem::size_of::<f32>()) as u64;
+            let value = (*d / f64::from(focus.scale)) as f32;
+            ctx.queue
+                .write_buffer(&focus.values, at, bytemuck::bytes_of(&value));
+            ctx.queue
+                .write_buffer(&focus.moments.m, at, bytemuck::bytes_of(&0.0f32));
+        }
+        Ok(())
+    }
+}
