@@ -103,7 +103,9 @@ pub enum Command {
     /// minutes on a 2-core CPU without a GPU.
     Demo(DemoArgs),
     /// Measure training speed on this machine: it/s, ms per iteration split into forward /
-    /// backward / optimizer / density control, Gaussian count, peak GPU and host memory.
+    /// backward / optimizer / density control, Gaussian count, peak GPU and host memory, and
+    /// the engine's operations per step. On a scene (`cocog bench SCENE`), or without one on
+    /// random Gaussians (`cocog bench --synthetic 1000000 --size 1920x1080`).
     Bench(BenchArgs),
     /// The lens learned for every training photo (focus distance, aperture), beside the true
     /// one when the dataset records it
@@ -667,9 +669,25 @@ pub struct DemoArgs {
 }
 
 #[derive(Args)]
+#[command(group(clap::ArgGroup::new("workload").required(true).args(["scene", "synthetic"])))]
 pub struct BenchArgs {
     /// An ingested scene directory (with points), e.g. from `cocog ingest`.
-    pub scene: PathBuf,
+    pub scene: Option<PathBuf>,
+    /// Instead of a scene: N random Gaussians filling a ball, seen by a ring of cameras
+    /// (every Gaussian in every frame), at a fixed count (no density control) with all SH
+    /// bands active from the third iteration. Measures speed at any count and size without
+    /// photos.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
+    pub synthetic: Option<u32>,
+    /// --synthetic: the image size, WIDTHxHEIGHT. Default 1920x1080.
+    #[arg(long, value_name = "WxH", conflicts_with = "scene", value_parser = parse_size)]
+    pub size: Option<(u32, u32)>,
+    /// --synthetic: cameras in the ring (the training views). Default 8.
+    #[arg(long, conflicts_with = "scene", value_parser = clap::value_parser!(u32).range(1..=1024))]
+    pub views: Option<u32>,
+    /// --synthetic: seed of the random Gaussians. Default 0.
+    #[arg(long, conflicts_with = "scene")]
+    pub seed: Option<u64>,
     /// Train on images downscaled by N. Default 1.
     #[arg(long, default_value_t = 1)]
     pub downscale: u32,
@@ -706,4 +724,17 @@ pub struct BenchArgs {
     /// Also time every GPU kernel (timestamp queries) over the profiled iterations.
     #[arg(long)]
     pub kernels: bool,
+}
+
+/// `WIDTHxHEIGHT`, both at least 1 and at most 65536.
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let bad = || format!("expected WIDTHxHEIGHT such as 1920x1080, got '{s}'");
+    let (w, h) = s.split_once(['x', 'X', '×']).ok_or_else(bad)?;
+    let side = |v: &str| {
+        v.trim()
+            .parse::<u32>()
+            .ok()
+            .filter(|v| (1..=65536).contains(v))
+    };
+    Ok((side(w).ok_or_else(bad)?, side(h).ok_or_else(bad)?))
 }

@@ -267,8 +267,24 @@ fn bench(a: &crate::cli::BenchArgs, g: &Global, ctx: &dyn Context) -> Result<()>
             }
         },
     };
-    let report = cocog_train::run_bench(&a.scene, &opts, ctx)
-        .with_context(|| format!("benchmarking {}", a.scene.display()))?;
+    let report = match (&a.scene, a.synthetic) {
+        (_, Some(gaussians)) => {
+            let spec = cocog_train::SyntheticSpec {
+                gaussians,
+                width: a.size.map_or(1920, |s| s.0),
+                height: a.size.map_or(1080, |s| s.1),
+                views: a.views.unwrap_or(8),
+                seed: a.seed.unwrap_or(0),
+            };
+            cocog_train::run_bench_synthetic(&spec, &opts, ctx)
+                .with_context(|| format!("benchmarking {gaussians} random Gaussians"))?
+        }
+        (Some(scene), None) => cocog_train::run_bench(scene, &opts, ctx)
+            .with_context(|| format!("benchmarking {}", scene.display()))?,
+        (None, None) => {
+            return Err(UsageError("bench needs a SCENE or --synthetic N".to_owned()).into());
+        }
+    };
     if g.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {

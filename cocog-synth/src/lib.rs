@@ -12,6 +12,7 @@ pub mod rig;
 mod rng;
 pub mod scene;
 pub mod sparse;
+pub mod workload;
 mod write;
 
 use std::path::PathBuf;

@@ -79,6 +79,12 @@ impl LossOutput {
 }
 
 impl ImageLoss {
+    /// Bytes of the largest buffer one binding of `compute` covers, for `pixels` pixels over
+    /// all images: the SSIM moments, five rgba planes per pixel.
+    pub fn largest_binding(pixels: u64) -> u64 {
+        5 * 16 * pixels
+    }
+
     pub fn new(ctx: &GpuContext) -> Self {
         let module = shader(ctx, "loss", include_str!("loss.wgsl"));
         Self {
@@ -122,8 +128,9 @@ impl ImageLoss {
         let (p5, p3) = (rec.uniform(&params(5)), rec.uniform(&params(3)));
         let px = u64::from(pixels) * 16;
         // The SSIM terms reuse the moments' scratch once the moments are consumed.
-        let tmp = ws.buffer(ctx, "ssim tmp", 5 * px);
-        let moments = ws.buffer(ctx, "ssim moments", 5 * px);
+        let moments_bytes = Self::largest_binding(u64::from(pixels));
+        let tmp = ws.buffer(ctx, "ssim tmp", moments_bytes);
+        let moments = ws.buffer(ctx, "ssim moments", moments_bytes);
         let partials = ws.buffer(ctx, "loss partials", u64::from(groups) * 16);
         let v_pred = ws.buffer(ctx, "v_pred", px);
         let terms = ws.buffer(ctx, "ssim terms", 3 * px);

@@ -12,7 +12,9 @@ use cocog_pipeline::{Context, Scene, Split, StageError};
 use serde::Serialize;
 
 use crate::stage::load;
-use crate::{CocTrainConfig, DensifyConfig, PhaseTimes, TrainConfig, TrainState, Trainer};
+use crate::{
+    CocTrainConfig, DensifyConfig, PhaseTimes, TrainConfig, TrainState, TrainView, Trainer,
+};
 
 /// What to measure.
 #[derive(Clone, Debug)]
@@ -57,6 +59,8 @@ pub struct PhaseMs {
 #[derive(Clone, Debug, Serialize)]
 pub struct BenchReport {
     pub adapter: String,
+    /// The scene directory, or the synthetic workload's description.
+    pub source: String,
     /// `3dgs` or `cocog`.
     pub method: String,
     /// Which gradient-accumulation path the backward used.
@@ -142,23 +146,14 @@ pub fn run_bench(
         None => None,
     };
     let start = resume.as_ref().map_or(0, |s| s.iteration);
-    let total = opts.warmup + 2 * opts.iterations;
     let config = TrainConfig {
-        iterations: start + total,
-        max_sh_degree: opts.max_sh_degree,
-        loss_every: 0,
         // The default schedule, with density control from the first iteration at its usual
         // interval, so a short run from the SfM points measures it too.
         densify: Some(DensifyConfig {
             from_iter: start.min(500),
             ..DensifyConfig::auto()
         }),
-        coc: opts.coc.clone().map(|c| CocTrainConfig {
-            blur_start: start + 1,
-            composite_start: start + 1,
-            ..c
-        }),
-        ..TrainConfig::default()
+        ..bench_config(start, opts)
     };
     let scratch = tempfile_dir(scene_dir)?;
     let views = load::split_views(
@@ -172,7 +167,7 @@ pub fn run_bench(
     )?;
     drop(scratch);
     let gpu = GpuContext::new().map_err(StageError::other)?;
-    let mut trainer = match &resume {
+    let trainer = match &resume {
         Some(state) => Trainer::resume(&gpu, state, &views, config),
         None => {
             let init = load::initial_gaussians(&scene, scene_dir)?;
@@ -180,6 +175,102 @@ pub fn run_bench(
         }
     }
     .map_err(StageError::other)?;
+    let source = scene_dir.display().to_string();
+    measure(&gpu, trainer, &views, start, source, opts, ctx)
+}
+
+/// A dataset-free workload: `gaussians` random Gaussians in a ball seen by a ring of `views`
+/// cameras (`cocog_synth::workload`), for step times at any count and resolution.
+#[derive(Clone, Debug)]
+pub struct SyntheticSpec {
+    pub gaussians: u32,
+    pub width: u32,
+    pub height: u32,
+    pub views: u32,
+    pub seed: u64,
+}
+
+/// Runs the benchmark on a synthetic workload: the count stays fixed (no density control) and
+/// every Gaussian carries SH of `opts.max_sh_degree`, all of it active from the third
+/// iteration, so the timed steps do the full work at the count asked for.
+pub fn run_bench_synthetic(
+    spec: &SyntheticSpec,
+    opts: &BenchOptions,
+    ctx: &dyn Context,
+) -> Result<BenchReport, StageError> {
+    if spec.gaussians == 0 || spec.views == 0 || spec.width == 0 || spec.height == 0 {
+        return Err(StageError::Options(format!(
+            "a synthetic workload needs Gaussians, views and a size, got {spec:?}"
+        )));
+    }
+    ctx.info(&format!(
+        "synthetic workload: {} Gaussians, {} views of {}×{}, seed {}",
+        spec.gaussians, spec.views, spec.width, spec.height, spec.seed
+    ));
+    let work = cocog_synth::workload::random_workload(
+        spec.gaussians as usize,
+        spec.width,
+        spec.height,
+        spec.views as usize,
+        opts.max_sh_degree,
+        spec.seed,
+    );
+    // The photos' content does not change the work of a step; smooth, distinct per view.
+    let views: Vec<TrainView> = (work.cameras.iter().enumerate())
+        .map(|(k, camera)| {
+            let (w, h) = (camera.width as f32, camera.height as f32);
+            let image = (0..camera.height)
+                .flat_map(|y| (0..camera.width).map(move |x| (x as f32, y as f32)))
+                .map(|(x, y)| [x / w, y / h, 0.5 + 0.4 * (k as f32).sin()])
+                .collect();
+            TrainView {
+                camera: *camera,
+                image,
+            }
+        })
+        .collect();
+    let config = TrainConfig {
+        sh_degree_interval: 1,
+        densify: None,
+        ..bench_config(0, opts)
+    };
+    let gpu = GpuContext::new().map_err(StageError::other)?;
+    let trainer = Trainer::new(&gpu, &work.gaussians, &views, config).map_err(StageError::other)?;
+    let source = format!(
+        "synthetic: {} random Gaussians, seed {}",
+        spec.gaussians, spec.seed
+    );
+    measure(&gpu, trainer, &views, 0, source, opts, ctx)
+}
+
+/// The run both sources share: `start` + warm-up + timed + profiled iterations, CoCoGaussian
+/// (when asked) from the first of them.
+fn bench_config(start: u32, opts: &BenchOptions) -> TrainConfig {
+    TrainConfig {
+        iterations: start + opts.warmup + 2 * opts.iterations,
+        max_sh_degree: opts.max_sh_degree,
+        loss_every: 0,
+        coc: opts.coc.clone().map(|c| CocTrainConfig {
+            blur_start: start + 1,
+            composite_start: start + 1,
+            ..c
+        }),
+        ..TrainConfig::default()
+    }
+}
+
+/// Warm-up, then the unprofiled iterations (throughput, engine counters, peak memory), then
+/// the profiled ones (phase split, kernel times).
+fn measure(
+    gpu: &GpuContext,
+    mut trainer: Trainer<'_>,
+    views: &[TrainView],
+    start: u32,
+    source: String,
+    opts: &BenchOptions,
+    ctx: &dyn Context,
+) -> Result<BenchReport, StageError> {
+    let total = opts.warmup + 2 * opts.iterations;
     let gaussians_start = trainer.num_gaussians();
     let mut step = |done: u32| -> Result<_, StageError> {
         ctx.check_cancelled()?;
@@ -200,7 +291,7 @@ pub fn run_bench(
     let seconds = clock.elapsed().as_secs_f64();
     let ops = gpu.counters.snapshot() - ops_before;
     trainer.set_profiling(true);
-    let timing = opts.kernels && gpu.profiler.enable(&gpu);
+    let timing = opts.kernels && gpu.profiler.enable(gpu);
     if opts.kernels && !timing {
         ctx.warn("bench: this adapter has no timestamp queries; no per-kernel times");
     }
@@ -208,7 +299,7 @@ pub fn run_bench(
     for i in 0..opts.iterations {
         let stats = trainer.step().map_err(StageError::other)?;
         if timing {
-            gpu.profiler.collect(&gpu).map_err(StageError::other)?;
+            gpu.profiler.collect(gpu).map_err(StageError::other)?;
         }
         ctx.progress(
             "bench",
@@ -231,6 +322,7 @@ pub fn run_bench(
         .collect();
     Ok(BenchReport {
         adapter: gpu.adapter_name(),
+        source,
         method: if opts.coc.is_some() { "cocog" } else { "3dgs" }.to_owned(),
         float_atomics: gpu.float_atomics,
         subgroups: gpu.subgroups,
@@ -283,6 +375,7 @@ impl BenchReport {
             .map_or("unknown".to_owned(), |b| format!("{:.0} MiB", mib(b)));
         format!(
             "adapter          {} (float atomics: {}, subgroups: {})\n\
+             source           {}\n\
              images           {} views at {}×{}\n\
              Gaussians        {} → {} (from iteration {})\n\
              method           {}\n\
@@ -294,6 +387,7 @@ impl BenchReport {
             self.adapter,
             yes_no(self.float_atomics),
             yes_no(self.subgroups),
+            self.source,
             self.views,
             self.width,
             self.height,

@@ -28,7 +28,9 @@ mod stats;
 mod trainer;
 
 pub use add_points::{add_points, box_volume, candidate_count};
-pub use bench::{BenchOptions, BenchReport, KernelMs, PhaseMs, run_bench};
+pub use bench::{
+    BenchOptions, BenchReport, KernelMs, PhaseMs, SyntheticSpec, run_bench, run_bench_synthetic,
+};
 pub use checkpoint::{
     CHECKPOINT_FILE, CheckpointError, CocCheckpoint, FocusState, MomentState, TrainState,
 };
