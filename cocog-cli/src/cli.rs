@@ -688,6 +688,11 @@ pub struct BenchArgs {
     /// --synthetic: seed of the random Gaussians. Default 0.
     #[arg(long, conflicts_with = "scene")]
     pub seed: Option<u64>,
+    /// --synthetic: also write the workload to DIR (gaussians.ply in the INRIA layout and
+    /// cameras.json), for a peer rasterizer to time the same Gaussians
+    /// (bench/peer_gsplat.py --workload DIR).
+    #[arg(long = "write-workload", value_name = "DIR", requires = "synthetic")]
+    pub write_workload: Option<PathBuf>,
     /// Train on images downscaled by N. Default 1.
     #[arg(long, default_value_t = 1)]
     pub downscale: u32,

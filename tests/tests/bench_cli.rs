@@ -1,12 +1,32 @@
 //! `cocog bench --synthetic`: speed on random Gaussians without a dataset, at a fixed count,
 //! and its usage errors.
 
-use cocog_tests::{cocog, stderr, stdout};
+use std::path::Path;
+use std::process::Command;
+
+use cocog_tests::{cocog, path_str, stderr, stdout};
+
+/// Whether python3 imports `modules`; absent → skip (printed), except under CI=true.
+fn python_has(modules: &str) -> bool {
+    let ok = Command::new("python3")
+        .args(["-c", &format!("import {modules}")])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    assert!(
+        ok || std::env::var("CI").as_deref() != Ok("true"),
+        "CI=true but python3 cannot import {modules}"
+    );
+    ok
+}
 
 #[test]
 fn a_synthetic_workload_keeps_its_count_and_size() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let workload = tmp.path().join("workload");
     let out = cocog(&[
         "bench",
+        "--write-workload",
+        path_str(&workload),
         "--synthetic",
         "3000",
         "--size",
@@ -44,6 +64,33 @@ fn a_synthetic_workload_keeps_its_count_and_size() {
     assert_eq!(ops["buffers_created"], 0.0, "{report}");
     assert_eq!(ops["blocking_reads"], 0.0, "{report}");
     assert_eq!(ops["submissions"], 1.0, "{report}");
+
+    // The peer script reads the same workload back (INRIA PLY through plyfile) and finds every
+    // Gaussian in every camera's frame.
+    if !python_has("numpy, plyfile") {
+        return;
+    }
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../bench/peer_gsplat.py");
+    let check = Command::new("python3")
+        .args([
+            path_str(&script),
+            "check",
+            "--workload",
+            path_str(&workload),
+        ])
+        .output()
+        .expect("python3");
+    let said = stdout(&check);
+    assert!(check.status.success(), "{said}{}", stderr(&check));
+    assert!(
+        said.contains("workload: 3000 Gaussians, SH degree 2, 4 cameras of 96x64"),
+        "{said}"
+    );
+    assert_eq!(
+        said.matches("1.000 of the points in its frame").count(),
+        4,
+        "{said}"
+    );
 }
 
 #[test]

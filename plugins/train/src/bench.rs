@@ -188,6 +188,9 @@ pub struct SyntheticSpec {
     pub height: u32,
     pub views: u32,
     pub seed: u64,
+    /// Also write the workload here (`gaussians.ply`, INRIA layout, and `cameras.json`), so a
+    /// peer rasterizer can time the same Gaussians (`bench/peer_gsplat.py --workload`).
+    pub write_to: Option<PathBuf>,
 }
 
 /// Runs the benchmark on a synthetic workload: the count stays fixed (no density control) and
@@ -215,6 +218,10 @@ pub fn run_bench_synthetic(
         opts.max_sh_degree,
         spec.seed,
     );
+    if let Some(dir) = &spec.write_to {
+        write_workload(dir, &work)?;
+        ctx.info(&format!("workload written to {}", dir.display()));
+    }
     // The photos' content does not change the work of a step; smooth, distinct per view.
     let views: Vec<TrainView> = (work.cameras.iter().enumerate())
         .map(|(k, camera)| {
@@ -241,6 +248,31 @@ pub fn run_bench_synthetic(
         spec.gaussians, spec.seed
     );
     measure(&gpu, trainer, &views, 0, source, opts, ctx)
+}
+
+/// `gaussians.ply` and `cameras.json` (per camera: fx, fy, cx, cy, width, height and the
+/// OpenCV `world_from_camera`), each written whole or not at all.
+fn write_workload(dir: &Path, work: &cocog_synth::workload::Workload) -> Result<(), StageError> {
+    std::fs::create_dir_all(dir).map_err(|e| StageError::io(dir, e))?;
+    let ply = dir.join("gaussians.ply");
+    cocog_formats::ply::write_splats(&ply, &(&work.gaussians).into(), None)
+        .map_err(StageError::other)?;
+    let cameras: Vec<serde_json::Value> = (work.cameras.iter())
+        .map(|c| {
+            serde_json::json!({
+                "fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy,
+                "width": c.width, "height": c.height,
+                "world_from_camera": c.world_from_camera,
+            })
+        })
+        .collect();
+    let json = serde_json::to_vec_pretty(&serde_json::json!({ "cameras": cameras }))
+        .map_err(StageError::other)?;
+    let path = dir.join("cameras.json");
+    cocog_formats::write_atomic(&path, |w| {
+        std::io::Write::write_all(w, &json).map_err(|e| cocog_formats::FormatError::io(&path, e))
+    })
+    .map_err(StageError::other)
 }
 
 /// The run both sources share: `start` + warm-up + timed + profiled iterations, CoCoGaussian
