@@ -1,6 +1,8 @@
 //! The GPU loss and its gradient against the f64 reference (FD-checked in
 //! reference_loss_fd.rs), and its PSNR partial sums against a plain f64 PSNR, on a batch of
-//! two odd-sized images with predictions outside [0, 1] (which the PSNR clamps).
+//! two odd-sized images with predictions outside [0, 1] (which the PSNR clamps); in one pass,
+//! and in bands of rows as images too large for one buffer binding are done (a binding limit
+//! lowered to force 5-row and 1-row bands, halos and image edges inside bands included).
 
 mod common;
 
@@ -22,8 +24,20 @@ fn gpu_loss_matches_reference() {
         .iter()
         .map(|p| std::array::from_fn(|k| (p[k] * 0.7 + rng.range_f32(0.0, 0.3)).min(1.0)))
         .collect();
-    let loss = ImageLoss::new(ctx);
-    for lambda in [0.0f32, 0.2, 1.0] {
+    // Bytes of one row of SSIM moments: a limit of 25 rows leaves 5-row bands, 21 rows 1-row.
+    let row = ImageLoss::largest_binding(w as u64);
+    for (limit, lambda) in [
+        (None, 0.0f32),
+        (None, 0.2),
+        (None, 1.0),
+        (Some(25 * row), 0.2),
+        (Some(25 * row), 1.0),
+        (Some(21 * row), 0.2),
+    ] {
+        let loss = match limit {
+            Some(bytes) => ImageLoss::new(ctx).with_binding_limit(bytes),
+            None => ImageLoss::new(ctx),
+        };
         let mut rec = ctx.recorder();
         let out = loss.compute(
             &mut rec,
@@ -51,7 +65,7 @@ fn gpu_loss_matches_reference() {
         let ref_psnr = 10.0 * (3.0 * npix as f64 / sq).log10();
         assert!(
             (value.psnr - ref_psnr).abs() < 1e-4,
-            "λ={lambda}: PSNR {} vs {ref_psnr}",
+            "λ={lambda} limit {limit:?}: PSNR {} vs {ref_psnr}",
             value.psnr
         );
         let gpu_grad: Vec<[f32; 4]> = ctx.read(&out.v_pred, npix).unwrap();
@@ -70,7 +84,7 @@ fn gpu_loss_matches_reference() {
         }
         assert!(
             (gpu_loss - ref_loss).abs() < 1e-5 * ref_loss.abs().max(1e-3),
-            "λ={lambda}: loss {gpu_loss} vs {ref_loss}"
+            "λ={lambda} limit {limit:?}: loss {gpu_loss} vs {ref_loss}"
         );
         let scale = ref_grad
             .iter()
@@ -81,7 +95,7 @@ fn gpu_loss_matches_reference() {
                 let err = (f64::from(g[k]) - r[k]).abs();
                 assert!(
                     err < 1e-3 * scale,
-                    "λ={lambda} pixel {p} channel {k}: {} vs {}",
+                    "λ={lambda} limit {limit:?} pixel {p} channel {k}: {} vs {}",
                     g[k],
                     r[k]
                 );

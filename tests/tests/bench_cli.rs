@@ -122,8 +122,8 @@ fn bench_usage_errors_say_what_was_expected() {
 }
 
 /// A photo size whose per-pixel buffers one GPU binding cannot cover is refused up front with
-/// the sizes and a way out (on lavapipe, 128 MiB: a 4000×3000 photo's SSIM moments need 916
-/// MiB), never a panic; an adapter that binds that much trains it.
+/// the sizes and a way out (on lavapipe, 128 MiB: a 4000×3000 photo's render needs 183 MiB),
+/// never a panic; an adapter that binds that much trains it.
 #[test]
 fn photos_too_large_for_a_binding_are_a_clear_error() {
     let out = cocog(&[
@@ -151,7 +151,7 @@ fn photos_too_large_for_a_binding_are_a_clear_error() {
     let said = stderr(&out);
     assert_eq!(out.status.code(), Some(1), "{said}");
     assert!(
-        said.contains("4000×3000 photos need a 916 MiB") && said.contains("--downscale"),
+        said.contains("4000×3000 photos need a 183 MiB") && said.contains("--downscale"),
         "{said}"
     );
 }

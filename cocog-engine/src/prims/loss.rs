@@ -13,9 +13,18 @@ struct Params {
     count: u32,
     lambda: f32,
     inv_n: f32,
-    pad: [u32; 2],
+    row0: i32,
+    rows: u32,
+    out0: i32,
+    out1: i32,
+    pixel0: u32,
+    partial0: u32,
     weights: [f32; 12],
 }
+
+/// Rows each side of a band that its two stacked 11-tap blurs read.
+const HALO: u32 = 10;
+const MAX_GRID_X: u32 = 65_535;
 
 #[derive(Debug)]
 pub struct ImageLoss {
@@ -24,6 +33,24 @@ pub struct ImageLoss {
     blur_v: Kernel,
     terms: Kernel,
     grad: Kernel,
+    /// Largest buffer binding to plan for; the device's limit unless a test lowers it.
+    binding_limit: Option<u64>,
+}
+
+/// One pass of the loss over scratch rows `row0..row0 + rows` of `num_images` images
+/// starting at pixel `pixel0`, scoring rows `out.0..out.1`.
+struct Band {
+    row0: i32,
+    rows: u32,
+    out: (i32, i32),
+    num_images: u32,
+    pixel0: u32,
+}
+
+/// Workgroups a 1D dispatch of `groups` launches (a 2D grid past the x limit).
+fn launched(groups: u32) -> u32 {
+    let x = groups.clamp(1, MAX_GRID_X);
+    x * groups.div_ceil(x)
 }
 
 /// The loss gradient (ready to pass to `Renderer::backward` as `v_rgba`) and the per-workgroup
@@ -79,10 +106,46 @@ impl LossOutput {
 }
 
 impl ImageLoss {
-    /// Bytes of the largest buffer one binding of `compute` covers, for `pixels` pixels over
-    /// all images: the SSIM moments, five rgba planes per pixel.
+    /// Bytes of the largest scratch buffer one binding of `compute` covers when the whole
+    /// batch is one pass, for `pixels` pixels over all images: the SSIM moments, five rgba
+    /// planes per pixel. Past the binding limit `compute` works in bands of rows instead.
     pub fn largest_binding(pixels: u64) -> u64 {
         5 * 16 * pixels
+    }
+
+    /// Plans for at most `bytes` per buffer binding instead of the device's limit (tests of
+    /// the banded path at small sizes).
+    pub fn with_binding_limit(mut self, bytes: u64) -> Self {
+        self.binding_limit = Some(bytes);
+        self
+    }
+
+    /// The passes for `num_images` images of `width`×`height`: one over everything when its
+    /// scratch fits a binding, else bands of rows per image, each with its halo.
+    fn bands(&self, limit: u64, width: u32, height: u32, num_images: u32) -> Vec<Band> {
+        let pixels = u64::from(width) * u64::from(height) * u64::from(num_images);
+        if Self::largest_binding(pixels) <= limit {
+            return vec![Band {
+                row0: 0,
+                rows: height,
+                out: (0, height as i32),
+                num_images,
+                pixel0: 0,
+            }];
+        }
+        let rows_fit = limit / Self::largest_binding(u64::from(width));
+        let band = (rows_fit.saturating_sub(u64::from(2 * HALO)) as u32).clamp(1, height);
+        (0..num_images)
+            .flat_map(|image| {
+                (0..height).step_by(band as usize).map(move |y0| Band {
+                    row0: y0 as i32 - HALO as i32,
+                    rows: band + 2 * HALO,
+                    out: (y0 as i32, (y0 + band).min(height) as i32),
+                    num_images: 1,
+                    pixel0: image * width * height,
+                })
+            })
+            .collect()
     }
 
     pub fn new(ctx: &GpuContext) -> Self {
@@ -93,6 +156,7 @@ impl ImageLoss {
             blur_v: Kernel::new(ctx, &module, "blur_v"),
             terms: Kernel::new(ctx, &module, "ssim_terms"),
             grad: Kernel::new(ctx, &module, "ssim_grad"),
+            binding_limit: None,
         }
     }
 
@@ -112,57 +176,75 @@ impl ImageLoss {
     ) -> LossOutput {
         let ctx = rec.ctx();
         let pixels = width * height * num_images;
-        let groups = pixels.div_ceil(256);
         let taps = window();
         let inv_n = 1.0 / (3.0 * f64::from(pixels));
-        let params = |count: u32| Params {
-            width,
-            height,
-            num_images,
-            count,
-            lambda,
-            inv_n: inv_n as f32,
-            pad: [0; 2],
-            weights: std::array::from_fn(|i| taps.get(i).map_or(0.0, |&w| w as f32)),
-        };
-        let (p5, p3) = (rec.uniform(&params(5)), rec.uniform(&params(3)));
-        let px = u64::from(pixels) * 16;
+        let limit = self
+            .binding_limit
+            .unwrap_or(ctx.device.limits().max_storage_buffer_binding_size);
+        let bands = self.bands(limit, width, height, num_images);
+        let scratch_px = |b: &Band| width * b.rows * b.num_images;
+        let largest = bands.iter().map(scratch_px).max().unwrap_or(0);
+        let slots: u32 = bands
+            .iter()
+            .map(|b| launched(scratch_px(b).div_ceil(256)))
+            .sum();
+        let px = u64::from(largest) * 16;
         // The SSIM terms reuse the moments' scratch once the moments are consumed.
-        let moments_bytes = Self::largest_binding(u64::from(pixels));
-        let tmp = ws.buffer(ctx, "ssim tmp", moments_bytes);
-        let moments = ws.buffer(ctx, "ssim moments", moments_bytes);
-        let partials = ws.buffer(ctx, "loss partials", u64::from(groups) * 16);
-        let v_pred = ws.buffer(ctx, "v_pred", px);
+        let tmp = ws.buffer(ctx, "ssim tmp", 5 * px);
+        let moments = ws.buffer(ctx, "ssim moments", 5 * px);
+        let partials = ws.buffer(ctx, "loss partials", u64::from(slots) * 16);
+        let v_pred = ws.buffer(ctx, "v_pred", u64::from(pixels) * 16);
         let terms = ws.buffer(ctx, "ssim terms", 3 * px);
-        self.moments_h
-            .dispatch_1d(rec, &[(0, &p5), (1, pred), (2, target), (4, &tmp)], groups);
-        self.blur_v
-            .dispatch_1d(rec, &[(0, &p5), (3, &tmp), (4, &moments)], groups);
-        self.terms.dispatch_1d(
-            rec,
-            &[
-                (0, &p5),
-                (1, pred),
-                (2, target),
-                (3, &moments),
-                (4, &terms),
-                (5, &partials),
-            ],
-            groups,
-        );
-        self.blur_h
-            .dispatch_1d(rec, &[(0, &p3), (3, &terms), (4, &tmp)], groups);
-        self.blur_v
-            .dispatch_1d(rec, &[(0, &p3), (3, &tmp), (4, &terms)], groups);
-        self.grad.dispatch_1d(
-            rec,
-            &[(0, &p3), (1, pred), (2, target), (3, &terms), (4, &v_pred)],
-            groups,
-        );
+        let mut partial0 = 0;
+        for band in &bands {
+            let groups = scratch_px(band).div_ceil(256);
+            let params = |count: u32| Params {
+                width,
+                height,
+                num_images: band.num_images,
+                count,
+                lambda,
+                inv_n: inv_n as f32,
+                row0: band.row0,
+                rows: band.rows,
+                out0: band.out.0,
+                out1: band.out.1,
+                pixel0: band.pixel0,
+                partial0,
+                weights: std::array::from_fn(|i| taps.get(i).map_or(0.0, |&w| w as f32)),
+            };
+            let (p5, p3) = (rec.uniform(&params(5)), rec.uniform(&params(3)));
+            self.moments_h
+                .dispatch_1d(rec, &[(0, &p5), (1, pred), (2, target), (4, &tmp)], groups);
+            self.blur_v
+                .dispatch_1d(rec, &[(0, &p5), (3, &tmp), (4, &moments)], groups);
+            self.terms.dispatch_1d(
+                rec,
+                &[
+                    (0, &p5),
+                    (1, pred),
+                    (2, target),
+                    (3, &moments),
+                    (4, &terms),
+                    (5, &partials),
+                ],
+                groups,
+            );
+            self.blur_h
+                .dispatch_1d(rec, &[(0, &p3), (3, &terms), (4, &tmp)], groups);
+            self.blur_v
+                .dispatch_1d(rec, &[(0, &p3), (3, &tmp), (4, &terms)], groups);
+            self.grad.dispatch_1d(
+                rec,
+                &[(0, &p3), (1, pred), (2, target), (3, &terms), (4, &v_pred)],
+                groups,
+            );
+            partial0 += launched(groups);
+        }
         LossOutput {
             v_pred,
             partials,
-            num_groups: groups as usize,
+            num_groups: slots as usize,
             lambda: f64::from(lambda),
             inv_n,
         }

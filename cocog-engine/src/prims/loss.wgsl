@@ -3,6 +3,12 @@
 // (x, y, x², y², xy); the gradient blurs the per-pixel partials (A, B, C) once more, since
 // the symmetric window makes the blur its own adjoint:
 //   ∂SSIM/∂x = G∗A + 2x·(G∗B) + y·(G∗C).
+//
+// The scratch planes cover `rows` image rows from `row0` (possibly outside the image) of
+// `num_images` images: all rows of all images at once, or, where that would exceed a buffer
+// binding, one band of one image with a 10-row halo each side (the two stacked blurs each
+// reach 5 rows). Rows of the scratch outside the image stay zero; only rows `out0..out1`
+// count towards the loss and get a gradient.
 
 struct Params {
     width: u32,
@@ -12,8 +18,14 @@ struct Params {
     count: u32,
     lambda: f32,
     inv_n: f32,
-    pad0: u32,
-    pad1: u32,
+    row0: i32,
+    rows: u32,
+    out0: i32,
+    out1: i32,
+    // Pixel offset of the (first) image in `pred`, `gt` and the gradient.
+    pixel0: u32,
+    // First slot of this dispatch's workgroup sums in `partials`.
+    partial0: u32,
     weights: array<vec4<f32>, 3>,
 }
 
@@ -40,7 +52,33 @@ fn pixel_id(gid: vec3<u32>, nwg: vec3<u32>) -> u32 {
 }
 
 fn num_pixels() -> u32 {
-    return params.width * params.height * params.num_images;
+    return params.width * params.rows * params.num_images;
+}
+
+// Row of scratch pixel `s` within the scratch, and within its image.
+fn local_row(s: u32) -> i32 {
+    return i32((s / params.width) % params.rows);
+}
+
+fn image_row(s: u32) -> i32 {
+    return params.row0 + local_row(s);
+}
+
+fn in_image(s: u32) -> bool {
+    let r = image_row(s);
+    return r >= 0 && r < i32(params.height);
+}
+
+fn counted(s: u32) -> bool {
+    let r = image_row(s);
+    return r >= params.out0 && r < params.out1 && r < i32(params.height);
+}
+
+// Index in `pred`, `gt` and the gradient of scratch pixel `s` (a row inside the image).
+fn image_pixel(s: u32) -> u32 {
+    let image = s / (params.width * params.rows);
+    return params.pixel0 + (image * params.height + u32(image_row(s))) * params.width
+        + s % params.width;
 }
 
 @compute @workgroup_size(256)
@@ -49,9 +87,15 @@ fn moments_h(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
     if (pix >= num_pixels()) {
         return;
     }
-    let x0 = i32(pix % params.width);
-    let row = pix - u32(x0);
     var m: array<vec3<f32>, 5>;
+    if (!in_image(pix)) {
+        for (var k = 0u; k < 5u; k++) {
+            dst[5u * pix + k] = vec4<f32>(0.0);
+        }
+        return;
+    }
+    let x0 = i32(pix % params.width);
+    let row = image_pixel(pix) - u32(x0);
     for (var i = -RADIUS; i <= RADIUS; i++) {
         let x = x0 + i;
         if (x < 0 || x >= i32(params.width)) {
@@ -71,12 +115,15 @@ fn moments_h(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
     }
 }
 
-fn blur(pix: u32, step: i32, pos: i32, extent: i32) {
+// Zero padding at the image's edges (`pos` of `extent`); taps that would leave the scratch
+// (`local` of `local_extent`, a band's halo) are skipped: those rows are not used.
+fn blur(pix: u32, step: i32, pos: i32, extent: i32, local: i32, local_extent: i32) {
     for (var k = 0u; k < params.count; k++) {
         var acc = vec4<f32>(0.0);
         for (var i = -RADIUS; i <= RADIUS; i++) {
             let p = pos + i;
-            if (p >= 0 && p < extent) {
+            let l = local + i;
+            if (p >= 0 && p < extent && l >= 0 && l < local_extent) {
                 acc += tap(i) * src[u32(i32(pix) + i * step) * params.count + k];
             }
         }
@@ -88,7 +135,8 @@ fn blur(pix: u32, step: i32, pos: i32, extent: i32) {
 fn blur_h(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
     let pix = pixel_id(gid, nwg);
     if (pix < num_pixels()) {
-        blur(pix, 1, i32(pix % params.width), i32(params.width));
+        let x = i32(pix % params.width);
+        blur(pix, 1, x, i32(params.width), x, i32(params.width));
     }
 }
 
@@ -96,7 +144,8 @@ fn blur_h(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
 fn blur_v(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
     let pix = pixel_id(gid, nwg);
     if (pix < num_pixels()) {
-        blur(pix, i32(params.width), i32((pix / params.width) % params.height), i32(params.height));
+        blur(pix, i32(params.width), image_row(pix), i32(params.height), local_row(pix),
+            i32(params.rows));
     }
 }
 
@@ -111,7 +160,11 @@ fn ssim_terms(
     // (L1, SSIM, squared error of the prediction clamped to [0, 1] as a saved image is —
     // what PSNR needs —, 0), summed over channels.
     var sums = vec4<f32>(0.0);
-    if (pix < num_pixels()) {
+    if (pix < num_pixels() && !in_image(pix)) {
+        for (var k = 0u; k < 3u; k++) {
+            dst[3u * pix + k] = vec4<f32>(0.0);
+        }
+    } else if (pix < num_pixels()) {
         let mx = src[5u * pix].xyz;
         let my = src[5u * pix + 1u].xyz;
         let vx = src[5u * pix + 2u].xyz - mx * mx;
@@ -129,9 +182,12 @@ fn ssim_terms(
         dst[3u * pix] = vec4<f32>(s_mu - 2.0 * mx * s_var - my * s_cov, 0.0);
         dst[3u * pix + 1u] = vec4<f32>(s_var, 0.0);
         dst[3u * pix + 2u] = vec4<f32>(s_cov, 0.0);
-        let diff = abs(pred[pix].xyz - gt[pix].xyz);
-        let e = clamp(pred[pix].xyz, vec3<f32>(0.0), vec3<f32>(1.0)) - gt[pix].xyz;
-        sums = vec4<f32>(diff.x + diff.y + diff.z, s.x + s.y + s.z, dot(e, e), 0.0);
+        if (counted(pix)) {
+            let at = image_pixel(pix);
+            let diff = abs(pred[at].xyz - gt[at].xyz);
+            let e = clamp(pred[at].xyz, vec3<f32>(0.0), vec3<f32>(1.0)) - gt[at].xyz;
+            sums = vec4<f32>(diff.x + diff.y + diff.z, s.x + s.y + s.z, dot(e, e), 0.0);
+        }
     }
     reduce[tid] = sums;
     workgroupBarrier();
@@ -142,19 +198,20 @@ fn ssim_terms(
         workgroupBarrier();
     }
     if (tid == 0u) {
-        partials[wid.x + wid.y * nwg.x] = reduce[0];
+        partials[params.partial0 + wid.x + wid.y * nwg.x] = reduce[0];
     }
 }
 
 @compute @workgroup_size(256)
 fn ssim_grad(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
     let pix = pixel_id(gid, nwg);
-    if (pix >= num_pixels()) {
+    if (pix >= num_pixels() || !counted(pix)) {
         return;
     }
-    let x = pred[pix].xyz;
-    let y = gt[pix].xyz;
+    let at = image_pixel(pix);
+    let x = pred[at].xyz;
+    let y = gt[at].xyz;
     let d_ssim = src[3u * pix].xyz + 2.0 * x * src[3u * pix + 1u].xyz + y * src[3u * pix + 2u].xyz;
     let l1 = sign(x - y);
-    dst[pix] = vec4<f32>(((1.0 - params.lambda) * l1 - params.lambda * d_ssim) * params.inv_n, 0.0);
+    dst[at] = vec4<f32>(((1.0 - params.lambda) * l1 - params.lambda * d_ssim) * params.inv_n, 0.0);
 }

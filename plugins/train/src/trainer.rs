@@ -752,20 +752,20 @@ fn depth_axis(cameras: &[Camera]) -> crate::DepthAxis {
 
 /// Views share one resolution and match their images; the Gaussians fit the SH limit.
 /// Refuses, before any GPU work, photos whose per-pixel buffers one binding cannot cover on
-/// this adapter (lavapipe binds at most 128 MiB: the SSIM moments of a 1920×1080 photo need
-/// 158 MiB), instead of failing in the first step.
+/// this adapter (lavapipe binds at most 128 MiB: one rgba render of 8.4 Mpixel, or the six of a
+/// lens-variant CoCoGaussian step at 1.4 Mpixel), instead of failing in the first step. The loss works in bands of rows and
+/// needs no check.
 fn check_binding_size(ctx: &GpuContext, w: u32, h: u32, sets: u32) -> Result<(), TrainError> {
     let limit = ctx.device.limits().max_storage_buffer_binding_size;
-    let pixels = u64::from(w) * u64::from(h);
-    // The loss sees one image (the blend, for CoCoGaussian); the renders are M + 1 rgba images.
-    let need = ImageLoss::largest_binding(pixels).max(16 * pixels * u64::from(sets));
+    let need = 16 * u64::from(w) * u64::from(h) * u64::from(sets);
     if need > limit {
         let mib = |b: u64| b as f64 / f64::from(1 << 20);
         let scale = (need as f64 / limit as f64).sqrt().ceil();
         return Err(TrainError::Invalid(format!(
-            "{w}×{h} photos need a {:.0} MiB GPU buffer binding, and {} binds at most {:.0} \
-             MiB: train on smaller images (--downscale {scale} or more)",
+            "{w}×{h} photos need a {:.0} MiB GPU buffer binding ({sets} rgba render{}), and {} \
+             binds at most {:.0} MiB: train on smaller images (--downscale {scale} or more)",
             mib(need),
+            if sets == 1 { "" } else { "s" },
             ctx.adapter_name(),
             mib(limit)
         )));
