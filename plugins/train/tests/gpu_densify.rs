@@ -101,15 +101,19 @@ fn densifying_from_a_sparse_cloud_grows_the_set_and_fits_held_out_views() {
     let s = scene(ctx, &mut rng);
     // Every fourth centre only: the missing Gaussians must come from densification.
     let init = noisy_init(&s.truth, 4, &mut rng);
+    // 400 iterations after the opacity reset at 300: with 200 the held-out gain fell between
+    // 4.7 and 6.4 dB from run to run (float atomics sum in any order and the run is chaotic),
+    // and on one CI machine below the 5 dB asked for. With 400 it measured 6.4-8.6 dB over
+    // six runs; the same run without densification gains 3.1 dB.
     let densify = DensifyConfig {
         from_iter: 50,
-        until_iter: 400,
+        until_iter: 450,
         interval: 50,
         opacity_reset_interval: 300,
         ..DensifyConfig::default()
     };
     let config = TrainConfig {
-        iterations: 500,
+        iterations: 700,
         max_sh_degree: 0,
         seed: 3,
         loss_every: 0,
@@ -119,7 +123,7 @@ fn densifying_from_a_sparse_cloud_grows_the_set_and_fits_held_out_views() {
     let mut trainer = Trainer::new(ctx, &init, &s.train, config).unwrap();
     let before = mean_psnr(&mut trainer, &s.test_cams, &s.test_images);
     let mut counts = Vec::new();
-    for it in 1..=500 {
+    for it in 1..=700 {
         let stats = trainer.step().unwrap();
         if it % 50 == 0 {
             counts.push(stats.num_gaussians);
