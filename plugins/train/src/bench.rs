@@ -341,6 +341,8 @@ fn measure(
         phases.add(&stats.phases.unwrap_or_default());
     }
     gpu.profiler.disable();
+    // Brings in a densification's count still on its way, for `gaussians_end`.
+    trainer.finish().map_err(StageError::other)?;
     let n = opts.iterations.max(1);
     let kernels = gpu
         .profiler

@@ -1,10 +1,9 @@
-//! INRIA adaptive density control as a CPU decision on read-back parameters and statistics:
-//! clone small Gaussians with large view-space gradients, split large ones, prune faint ones.
-//! It runs every `interval` iterations, so the readback cost is amortised.
+//! INRIA adaptive density control: clone small Gaussians with large view-space gradients,
+//! split large ones, prune faint ones. `plan_densify` is the rule on the CPU: the trainer's
+//! fallback when a doubled set would not fit a buffer binding, and the oracle the GPU version
+//! (densify_gpu.rs, the trainer's path) is tested against.
 
 use cocog_engine::GaussianParams;
-
-use crate::SplitMix64;
 
 /// INRIA 2023 `OptimizationParams` densification defaults (method.md §7).
 #[derive(Clone, Debug, PartialEq)]
@@ -181,14 +180,15 @@ const SPLIT_SCALE_DIV: f32 = 0.8 * SPLIT_CHILDREN as f32;
 /// extent). `prune_large` is INRIA's `max_screen_size` branch (`DensifyConfig::prunes_large_at`);
 /// only its world-space test is modelled, because INRIA zeroes `max_radii2D` in
 /// `densification_postfix` just before it, so its screen-size test never fires. With
-/// `depth_prune_range` > 1, depths along `axis` weight the opacity threshold.
+/// `depth_prune_range` > 1, depths along `axis` weight the opacity threshold. Split children
+/// are sampled from `noise`, as densify.wgsl samples them.
 pub fn plan_densify(
     g: &GaussianParams,
     mean_grads: &[f32],
     scale: f64,
     prune_large: bool,
     config: &DensifyConfig,
-    rng: &mut SplitMix64,
+    noise: &SplitNoise,
     axis: Option<&DepthAxis>,
 ) -> DensifyPlan {
     let n = g.len();
@@ -211,10 +211,11 @@ pub fn plan_densify(
         .collect();
     origins.extend(clones.iter().map(|&i| Origin::Clone(i)));
     // torch's `repeat(N, 1)`: all first children, then all second children.
-    for _ in 0..SPLIT_CHILDREN {
+    for child in 0..SPLIT_CHILDREN {
         for &i in &splits {
             let scale = g.log_scales[i].map(f32::exp);
-            let sample: [f64; 3] = std::array::from_fn(|a| f64::from(scale[a]) * normal(rng));
+            let sample: [f64; 3] =
+                std::array::from_fn(|a| f64::from(scale[a]) * noise.normal(i, child, a));
             let r = rotation(g.quats[i]);
             let mean = std::array::from_fn(|row| {
                 let offset: f64 = (0..3).map(|c| r[row][c] * sample[c]).sum();
@@ -313,11 +314,33 @@ fn sigmoid(x: f32) -> f32 {
     1.0 / (1.0 + (-x).exp())
 }
 
-/// Standard normal sample (Box–Muller).
-fn normal(rng: &mut SplitMix64) -> f64 {
-    let u1 = 1.0 - rng.next_f64();
-    let u2 = rng.next_f64();
-    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+/// The standard normals split children are drawn with: a counter-based hash of the seed, the
+/// iteration, the Gaussian, the child and the axis, so the GPU (densify.wgsl) draws the same
+/// ones in any order and a resumed run draws what the uninterrupted one did.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SplitNoise {
+    pub seed: u64,
+    pub iteration: u32,
+}
+
+impl SplitNoise {
+    /// Box–Muller on two 24-bit uniforms, u1 in (0, 1] and u2 in [0, 1).
+    pub fn normal(&self, gaussian: usize, child: usize, axis: usize) -> f64 {
+        let key = pcg(self.seed as u32
+            ^ pcg((self.seed >> 32) as u32
+                ^ pcg(self.iteration ^ pcg(gaussian as u32 ^ pcg(child as u32 * 3 + axis as u32)))));
+        let unit = 1.0 / f64::from(1u32 << 24);
+        let u1 = f64::from((pcg(key ^ 1) >> 8) + 1) * unit;
+        let u2 = f64::from(pcg(key ^ 2) >> 8) * unit;
+        (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+    }
+}
+
+/// PCG hash (Jarzynski & Olano, "Hash functions for GPU rendering", 2020).
+fn pcg(v: u32) -> u32 {
+    let state = v.wrapping_mul(747_796_405).wrapping_add(2_891_336_453);
+    let word = ((state >> ((state >> 28) + 4)) ^ state).wrapping_mul(277_803_737);
+    (word >> 22) ^ word
 }
 
 /// INRIA `build_rotation` of a (w, x, y, z) quaternion, normalised first.

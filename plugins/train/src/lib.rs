@@ -4,8 +4,8 @@
 //! gives the scale the position learning rate is relative to, and `Trainer` runs
 //! forward → (1 − λ)·L1 + λ·D-SSIM → backward → per-group Adam, one view per iteration in a
 //! seeded order, raising the SH degree every `sh_degree_interval` iterations. Everything but
-//! the occasional loss readback, the SH growth and the densification decision (made on the
-//! CPU from statistics accumulated on the GPU, every 100 iterations) stays on the GPU.
+//! the SH growth and Deblurring 3DGS's point addition stays on the GPU, densification
+//! included; losses and densified counts come back asynchronously, a few steps late.
 //!
 //! Determinism: the initialisation and the view order depend only on the inputs and the seed.
 //! The GPU backward accumulates gradients with float atomics, whose summation order varies,
@@ -17,6 +17,7 @@ mod checkpoint;
 mod coc_config;
 mod config;
 mod densify;
+mod densify_gpu;
 mod drop_watch;
 mod error;
 mod focus_estimate;
@@ -37,8 +38,10 @@ pub use checkpoint::{
 pub use coc_config::CocTrainConfig;
 pub use config::TrainConfig;
 pub use densify::{
-    DensifyConfig, DensifyPlan, DepthAxis, Origin, apply_plan, gather_rows, plan_densify,
+    DensifyConfig, DensifyPlan, DepthAxis, Origin, SplitNoise, apply_plan, gather_rows,
+    plan_densify,
 };
+pub use densify_gpu::{BURIED_OPACITY_LOGIT, DensifyInputs, GpuDensify};
 pub use drop_watch::{DROP_DB, DropWatch, PsnrDrop};
 pub use error::TrainError;
 pub use init::{SH_C0, init_from_points, inverse_sigmoid, rgb_to_sh, scene_extent};

@@ -50,9 +50,13 @@ impl GradStats {
         }
     }
 
-    /// The running sums and counts, for a checkpoint.
-    pub fn read_raw(&self, ctx: &GpuContext) -> Result<(Vec<f32>, Vec<f32>), TrainError> {
-        let n = self.len as usize;
+    /// The running sums and counts of the first `rows` Gaussians, for a checkpoint.
+    pub fn read_raw(
+        &self,
+        ctx: &GpuContext,
+        rows: u32,
+    ) -> Result<(Vec<f32>, Vec<f32>), TrainError> {
+        let n = rows.min(self.len) as usize;
         Ok((ctx.read(&self.accum, n)?, ctx.read(&self.denom, n)?))
     }
 
@@ -61,6 +65,46 @@ impl GradStats {
         self.accum = ctx.storage("grad accum", u64::from(num_gaussians) * 4);
         self.denom = ctx.storage("grad denom", u64::from(num_gaussians) * 4);
         self.len = num_gaussians;
+    }
+
+    /// Room for `needed` Gaussians: when short, buffers of `grown` keeping the live
+    /// statistics (the copy recorded in `rec`).
+    pub fn reserve(&mut self, rec: &mut Recorder, needed: u32, grown: u32) {
+        if self.accum.size() >= u64::from(needed) * 4 {
+            return;
+        }
+        let bytes = u64::from(grown.max(needed)) * 4;
+        let ctx = rec.ctx();
+        let live = u64::from(self.len) * 4;
+        for (old, name) in [
+            (&mut self.accum, "grad accum"),
+            (&mut self.denom, "grad denom"),
+        ] {
+            let grown = ctx.storage(name, bytes);
+            if live > 0 {
+                rec.encoder().copy_buffer_to_buffer(old, 0, &grown, 0, live);
+            }
+            *old = grown;
+        }
+    }
+
+    /// Records zeroing the statistics of `n` Gaussians (after densification set that count);
+    /// the buffers must hold them (`reserve`).
+    pub fn restart(&mut self, rec: &mut Recorder, n: u32) {
+        debug_assert!(self.accum.size() >= u64::from(n) * 4);
+        rec.encoder().clear_buffer(&self.accum, 0, None);
+        rec.encoder().clear_buffer(&self.denom, 0, None);
+        self.len = n;
+    }
+
+    /// Keeps the statistics of the first `n` Gaussians only (the rest were buried rows).
+    pub fn truncate(&mut self, n: u32) {
+        self.len = self.len.min(n);
+    }
+
+    /// The running sums and visible-view counts.
+    pub fn buffers(&self) -> (&GpuBuffer, &GpuBuffer) {
+        (&self.accum, &self.denom)
     }
 
     /// Records adding one single-image pass of `width`×`height`; a pass whose intersection

@@ -34,7 +34,9 @@ pub struct StepStats {
     pub iteration: u32,
     pub view: usize,
     pub sh_degree: u32,
-    /// Gaussians after this iteration's densification, if any.
+    /// Gaussians the next iteration trains. Right after a GPU densification that is twice
+    /// the count before it (the rows past the new count buried) until the new count arrives,
+    /// a few iterations later; `Trainer::gaussians` never includes buried rows.
     pub num_gaussians: u32,
     /// Loss and PSNR of earlier iterations (divisible by `TrainConfig::loss_every`) whose
     /// asynchronous read-back arrived during this one, oldest first.
@@ -65,6 +67,23 @@ struct InFlight {
     sh_degree: u32,
     /// The loss whose partial sums follow the status, on logging iterations.
     loss: Option<LossOutput>,
+}
+
+/// What a read-back slot carries: a step's status (and loss), or the Gaussian count a
+/// densification left.
+#[derive(Debug)]
+enum Pending {
+    Step(InFlight),
+    Count,
+}
+
+/// A densification whose count has not reached the CPU yet.
+#[derive(Debug)]
+struct PendingCount {
+    /// [after, kept, cloned, split] as u32.
+    counts: GpuBuffer,
+    /// The count before it.
+    before: u32,
 }
 
 /// Seconds one iteration spent in each phase. Profiling waits for the GPU after every phase,
@@ -170,6 +189,15 @@ impl Moments {
             sh: AdamMoments::new(ctx, sh * n),
         }
     }
+
+    /// Densification left `n` Gaussians in the buffers (`sh` floats of SH per Gaussian).
+    fn set_count(&mut self, n: u32, sh: u32) {
+        self.means.len = 3 * n;
+        self.log_scales.len = 3 * n;
+        self.quats.len = 4 * n;
+        self.opacity_logits.len = n;
+        self.sh.len = sh * n;
+    }
 }
 
 /// Vanilla 3DGS optimisation of one Gaussian set against posed images, all on the GPU.
@@ -192,14 +220,18 @@ pub struct Trainer<'c> {
     ws: Workspace,
     /// Room for (tile, Gaussian) intersections in a step (see `capacity.rs`).
     capacity: u32,
-    readback: Readback<InFlight>,
+    readback: Readback<Pending>,
+    /// Set from a densification until its count arrives; meanwhile steps train 2× the old
+    /// count, the rows past the new one buried.
+    pending_count: Option<PendingCount>,
     /// Views whose step overflowed the intersection buffers (the GPU skipped its update),
     /// trained again before new ones.
     redo: VecDeque<usize>,
     moments: Moments,
     order: ViewOrder,
-    /// Densification statistics and the split sampler.
+    /// Densification statistics.
     stats: GradStats,
+    densify: crate::GpuDensify,
     /// CoCoGaussian's h_θ, F and focus distances, when `config.coc` asks for them.
     coc: Option<coc::CocState>,
     rng: SplitMix64,
@@ -276,6 +308,7 @@ impl<'c> Trainer<'c> {
             loss: ImageLoss::new(ctx),
             adam: Adam::new(ctx),
             opacity_reset: density::opacity_reset_kernel(ctx),
+            densify: crate::GpuDensify::new(ctx),
             targets,
             v_depth: ctx.storage("v_depth", u64::from(w * h) * 4),
             moments: state.moments,
@@ -290,6 +323,7 @@ impl<'c> Trainer<'c> {
             ws: Workspace::default(),
             capacity: 0,
             readback: Readback::new(IN_FLIGHT),
+            pending_count: None,
             redo: VecDeque::new(),
             order: state.order,
             depth_axis: depth_axis(&cameras),
@@ -414,9 +448,10 @@ impl<'c> Trainer<'c> {
         self.absorb(done)
     }
 
-    /// One iteration: raise the SH degree if due, pick the next view, optimise on it. Records
-    /// one submission and waits for nothing but a step `IN_FLIGHT` iterations old, except on
-    /// densification and SH-growth iterations (still decided on the CPU).
+    /// One iteration: raise the SH degree if due, pick the next view, optimise on it, densify
+    /// and reset opacities when due. Records one submission and waits for nothing but a step
+    /// `IN_FLIGHT` iterations old, except on SH-growth and point-addition iterations (still
+    /// done on the CPU) and densifications too large for a buffer binding.
     pub fn step(&mut self) -> Result<StepStats, TrainError> {
         let it = self.iteration + 1;
         let mut watch = Stopwatch::new(self.profiling);
@@ -460,6 +495,11 @@ impl<'c> Trainer<'c> {
         if refocus {
             self.refocus()?;
         }
+        let densify = d.as_ref().filter(|_| plan.densify);
+        let on_gpu = self.densifies_on_gpu(self.num_gaussians());
+        // INRIA's order: densify, (Deblurring 3DGS) add points, reset opacities.
+        let adds_points = d.as_ref().is_some_and(|d| d.adds_points_at(it));
+        let reset_in_step = plan.reset_opacity && !adds_points && (on_gpu || !plan.densify);
         let mut batch = self.batch.take().ok_or(TrainError::Poisoned)?;
         let result = self
             .aim(&mut batch, self.cameras[view], background)
@@ -470,15 +510,21 @@ impl<'c> Trainer<'c> {
                 } else {
                     self.optimise(&mut rec, &batch, view, it, plan, &mut watch)?;
                 }
+                if let Some(d) = densify.filter(|_| on_gpu) {
+                    self.densify_on_gpu(&mut rec, &mut batch.params, d, it)?;
+                }
+                if reset_in_step {
+                    self.record_opacity_reset(&mut rec, &batch.params);
+                }
                 rec.submit();
                 self.readback.start();
                 Ok(())
             });
         self.batch = Some(batch);
         result?;
-        if let Some(d) = d.as_ref().filter(|_| plan.densify) {
+        if let Some(d) = densify.filter(|_| !on_gpu) {
             let before = self.num_gaussians();
-            self.densify_and_prune(d, it)?;
+            self.densify_on_cpu(d, it)?;
             self.grow_capacity_with(before);
         }
         if let Some(d) = d.as_ref().filter(|d| d.adds_points_at(it)) {
@@ -486,7 +532,7 @@ impl<'c> Trainer<'c> {
             self.add_points(d)?;
             self.grow_capacity_with(before);
         }
-        if plan.reset_opacity {
+        if plan.reset_opacity && !reset_in_step {
             self.reset_opacity()?;
         }
         watch.times.density += watch.lap(self.ctx)?;
@@ -519,11 +565,24 @@ impl<'c> Trainer<'c> {
 
     /// Turns finished read-backs into readings; an overflowed step grows the intersection
     /// room and queues its view again.
-    fn absorb(&mut self, done: Vec<(InFlight, Vec<u8>)>) -> Result<Vec<Reading>, TrainError> {
+    fn absorb(&mut self, done: Vec<(Pending, Vec<u8>)>) -> Result<Vec<Reading>, TrainError> {
         let mut readings = Vec::new();
-        for (step, bytes) in done {
-            let word =
-                |i: usize| u32::from_le_bytes(bytes[4 * i..4 * i + 4].try_into().unwrap_or([0; 4]));
+        for (pending, bytes) in done {
+            let words: Vec<u32> = bytes
+                .chunks_exact(4)
+                .map(|w| u32::from_le_bytes([w[0], w[1], w[2], w[3]]))
+                .collect();
+            let step = match pending {
+                Pending::Step(step) => step,
+                Pending::Count => {
+                    let mut batch = self.batch.take().ok_or(TrainError::Poisoned)?;
+                    let result = self.apply_count(&mut batch.params, &words);
+                    self.batch = Some(batch);
+                    result?;
+                    continue;
+                }
+            };
+            let word = |i: usize| words.get(i).copied().unwrap_or(0);
             let (overflowed, needed) = (word(0) != 0, word(1));
             self.note_intersections(needed);
             if overflowed {
@@ -574,8 +633,9 @@ impl<'c> Trainer<'c> {
     /// Reads the current Gaussians back to the CPU (one sync per parameter buffer).
     pub fn gaussians(&self) -> Result<GaussianParams, TrainError> {
         let p = self.params()?;
+        let n = self.exact_count()?;
         // The gradient readback reads any buffers shaped like the parameters.
-        let g = p.read_grads(self.ctx, 0, p.num_gaussians)?;
+        let g = p.read_grads(self.ctx, 0, n)?;
         Ok(GaussianParams {
             sh_degree: p.sh_degree,
             means: g.v_means,
@@ -652,7 +712,7 @@ impl<'c> Trainer<'c> {
             sh_degree: params.sh_degree,
             loss: logged.then(|| out.clone()),
         };
-        Ok(self.readback.record(rec, &ranges, tag)?)
+        Ok(self.readback.record(rec, &ranges, Pending::Step(tag))?)
     }
 
     /// Adam on the base Gaussians with gradients `v` (means, log-scales, rotations,
@@ -697,6 +757,7 @@ impl<'c> Trainer<'c> {
     /// INRIA allocates degree 3 up front and masks; the result is the same because masked
     /// coefficients get zero gradients, so their parameters and moments stay zero until used.
     fn raise_sh_degree(&mut self, degree: u32) -> Result<(), TrainError> {
+        self.settle()?;
         let ctx = self.ctx;
         let params = self
             .batch

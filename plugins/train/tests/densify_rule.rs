@@ -2,7 +2,7 @@
 
 use cocog_engine::GaussianParams;
 use cocog_train::{
-    DensifyConfig, DepthAxis, Origin, SplitMix64, apply_plan, gather_rows, inverse_sigmoid,
+    DensifyConfig, DepthAxis, Origin, SplitNoise, apply_plan, gather_rows, inverse_sigmoid,
     plan_densify,
 };
 
@@ -46,7 +46,10 @@ fn clone_split_and_prune_follow_the_inria_rule() {
         1.0,
         false,
         &config,
-        &mut SplitMix64::new(3),
+        &SplitNoise {
+            seed: 3,
+            iteration: 600,
+        },
         None,
     );
     // Originals minus the split one, then clones (0 and 3), then two children of 1; the faint
@@ -117,7 +120,10 @@ fn after_the_first_reset_large_gaussians_are_pruned_and_seeds_repeat() {
         1.0,
         true,
         &config,
-        &mut SplitMix64::new(3),
+        &SplitNoise {
+            seed: 3,
+            iteration: 600,
+        },
         None,
     );
     assert!(!plan.origins.contains(&Origin::Keep(4)));
@@ -128,7 +134,10 @@ fn after_the_first_reset_large_gaussians_are_pruned_and_seeds_repeat() {
         1.0,
         true,
         &config,
-        &mut SplitMix64::new(3),
+        &SplitNoise {
+            seed: 3,
+            iteration: 600,
+        },
         None,
     );
     assert_eq!(plan, again);
@@ -160,7 +169,18 @@ fn far_gaussians_survive_a_depth_weighted_prune() {
         ..DensifyConfig::default()
     };
     let plan = |c: &DensifyConfig, axis| {
-        plan_densify(&g, &grads, 1.0, false, c, &mut SplitMix64::new(1), axis)
+        plan_densify(
+            &g,
+            &grads,
+            1.0,
+            false,
+            c,
+            &SplitNoise {
+                seed: 1,
+                iteration: 600,
+            },
+            axis,
+        )
     };
     // 0.003 < 0.005: all pruned uniformly.
     assert_eq!(plan(&uniform, Some(&axis)).origins.len(), 0);

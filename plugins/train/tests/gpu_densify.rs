@@ -1,11 +1,14 @@
 //! Density control on the GPU: the statistics kernel against a CPU model of INRIA's
-//! `add_densification_stats`, and a training run that densifies, resets opacities and still
-//! fits held-out views.
+//! `add_densification_stats`, the GPU densification against the CPU rule it replaces, and a
+//! training run that densifies, resets opacities and still fits held-out views.
 
 mod common;
 
-use cocog_engine::{Batch, ImageLoss, Renderer, View, Workspace};
-use cocog_train::{DensifyConfig, GradStats, SplitMix64, TrainConfig, Trainer};
+use cocog_engine::{Batch, GaussianParams, ImageLoss, ParamBuffers, Renderer, View, Workspace};
+use cocog_train::{
+    BURIED_OPACITY_LOGIT, DensifyConfig, DensifyInputs, DepthAxis, GpuDensify, GradStats,
+    SplitMix64, SplitNoise, TrainConfig, Trainer, apply_plan, gather_rows, plan_densify,
+};
 use common::*;
 
 #[test]
@@ -125,18 +128,21 @@ fn densifying_from_a_sparse_cloud_grows_the_set_and_fits_held_out_views() {
     let mut counts = Vec::new();
     for it in 1..=700 {
         let stats = trainer.step().unwrap();
-        if it % 50 == 0 {
+        // Mid-interval, when a densification's count has arrived.
+        if it % 50 == 25 {
             counts.push(stats.num_gaussians);
         }
         if it == 300 {
+            // Densification at 300 too: its count arrives a few steps later, and until then
+            // the step trains up to twice the old count, the extra rows buried.
             let g = trainer.gaussians().unwrap();
-            assert_eq!(g.len() as u32, stats.num_gaussians);
+            assert!(g.len() as u32 <= stats.num_gaussians);
             let cap = cocog_train::inverse_sigmoid(0.01) + 1e-6;
             assert!(g.opacity_logits.iter().all(|&l| l <= cap), "opacity reset");
         }
     }
     let after = mean_psnr(&mut trainer, &s.test_cams, &s.test_images);
-    eprintln!("Gaussians every 50 its {counts:?}; held-out PSNR {before:.2} → {after:.2} dB");
+    eprintln!("Gaussians at 25, 75, … {counts:?}; held-out PSNR {before:.2} → {after:.2} dB");
     assert!(
         *counts.iter().max().unwrap() > 2 * init.len() as u32,
         "{counts:?}"
@@ -146,4 +152,208 @@ fn densifying_from_a_sparse_cloud_grows_the_set_and_fits_held_out_views() {
         "PSNR only went from {before} to {after}"
     );
     trainer.gaussians().unwrap().validate().unwrap();
+}
+
+/// A set where every branch of the rule is taken: about half the Gaussians hot, scales on both
+/// sides of the clone/split boundary (0.01 here) and of the large-prune one (0.1), opacities
+/// on both sides of the (depth-weighted) 0.005 threshold, rotations and SH of degree 1, and
+/// row `n..2n` junk that densification must overwrite or leave alone.
+fn random_case(n: usize, rng: &mut SplitMix64) -> (GaussianParams, Vec<f32>, Vec<f32>) {
+    let mut u = |lo: f64, hi: f64| (lo + (hi - lo) * rng.next_f64()) as f32;
+    let mut g = GaussianParams {
+        sh_degree: 1,
+        ..Default::default()
+    };
+    let (mut accum, mut denom) = (Vec::new(), Vec::new());
+    for i in 0..2 * n {
+        let junk = i >= n;
+        g.means.push(if junk {
+            [1e6; 3]
+        } else {
+            [u(-1.0, 1.0), u(-1.0, 1.0), u(0.5, 3.0)]
+        });
+        let size = u(-6.5, -1.5);
+        g.log_scales.push([
+            size + u(-0.5, 0.5),
+            size + u(-0.5, 0.5),
+            size + u(-0.5, 0.5),
+        ]);
+        g.quats
+            .push([u(-1.0, 1.0), u(-1.0, 1.0), u(-1.0, 1.0), u(-1.0, 1.0)]);
+        // Opacity from 0.0007 to 0.05.
+        g.opacity_logits.push(u(-7.3, -3.0));
+        g.sh.extend((0..12).map(|_| u(-1.0, 1.0)));
+        let views = (u(0.0, 4.0) as u32) as f32;
+        denom.push(views);
+        accum.push(views * u(0.0, 4e-4));
+    }
+    (g, accum, denom)
+}
+
+#[test]
+fn gpu_densification_makes_the_cpu_rules_decisions() {
+    let Some(ctx) = gpu() else { return };
+    let n = 700;
+    let mut rng = SplitMix64::new(77);
+    let (g, accum, denom) = random_case(n, &mut rng);
+    let moments: Vec<(Vec<f32>, u32)> = [3u32, 3, 3, 3, 4, 4, 1, 1, 12, 12]
+        .iter()
+        .map(|&stride| {
+            let len = 2 * n * stride as usize;
+            ((0..len).map(|_| rng.next_f64() as f32).collect(), stride)
+        })
+        .collect();
+    let axes = [
+        (3.0, Some([0.1, -0.2, 0.97]), false),
+        (2.0, None, true),
+        (1.0, Some([0.0, 0.0, 1.0]), true),
+    ];
+    let densify = GpuDensify::new(ctx);
+    for (case, (range, forward, prune_large)) in axes.into_iter().enumerate() {
+        let config = DensifyConfig {
+            depth_prune_range: range,
+            ..DensifyConfig::default()
+        };
+        let forward = forward.map(|f: [f64; 3]| {
+            let l = f.iter().map(|v| v * v).sum::<f64>().sqrt();
+            f.map(|v| v / l)
+        });
+        let axis = DepthAxis {
+            origin: [0.05, -0.1, -0.5],
+            forward,
+        };
+        let noise = SplitNoise {
+            seed: 0x1234_5678_9abc_def0,
+            iteration: 600 + case as u32,
+        };
+        let mut params = ParamBuffers::upload(ctx, &[&g]).unwrap();
+        params.num_gaussians = n as u32;
+        let accum_gpu = ctx.storage_from("accum", &accum);
+        let denom_gpu = ctx.storage_from("denom", &denom);
+        let moment_gpu: Vec<(cocog_engine::GpuBuffer, u32)> = moments
+            .iter()
+            .map(|(m, s)| (ctx.storage_from("moment", m), *s))
+            .collect();
+        let moment_refs: Vec<(&cocog_engine::GpuBuffer, u32)> =
+            moment_gpu.iter().map(|(b, s)| (b, *s)).collect();
+        let inputs = DensifyInputs {
+            config: &config,
+            scale: 1.0,
+            prune_large,
+            noise,
+            axis: &axis,
+            accum: &accum_gpu,
+            denom: &denom_gpu,
+            moments: &moment_refs,
+        };
+        let mut ws = Workspace::default();
+        let mut rec = ctx.recorder();
+        let recorded = densify.record(&mut rec, &mut ws, &params, &inputs);
+        rec.submit();
+        let counts: Vec<u32> = ctx.read(&recorded.counts, 4).unwrap();
+
+        // The oracle: the CPU rule on the first n rows.
+        let live = GaussianParams {
+            sh_degree: 1,
+            means: g.means[..n].to_vec(),
+            log_scales: g.log_scales[..n].to_vec(),
+            quats: g.quats[..n].to_vec(),
+            opacity_logits: g.opacity_logits[..n].to_vec(),
+            sh: g.sh[..12 * n].to_vec(),
+        };
+        let mean_grads: Vec<f32> = (0..n)
+            .map(|i| {
+                if denom[i] > 0.0 {
+                    accum[i] / denom[i]
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let plan = plan_densify(
+            &live,
+            &mean_grads,
+            1.0,
+            prune_large,
+            &config,
+            &noise,
+            Some(&axis),
+        );
+        let want = apply_plan(&live, &plan);
+        eprintln!(
+            "case {case}: {n} → {} Gaussians ({} cloned, {} split, {} pruned)",
+            plan.origins.len(),
+            plan.cloned,
+            plan.split,
+            plan.pruned
+        );
+        assert!(
+            plan.cloned > 20 && plan.split > 20 && plan.pruned > 20,
+            "case {case} misses a branch"
+        );
+        let kept = n - plan.split;
+        assert_eq!(
+            counts,
+            [
+                plan.origins.len() as u32,
+                kept as u32,
+                plan.cloned as u32,
+                plan.split as u32
+            ],
+            "case {case}: [after, kept, cloned, split]"
+        );
+        let r = params.read_grads(ctx, 0, counts[0]).unwrap();
+        let got = GaussianParams {
+            sh_degree: 1,
+            means: r.v_means,
+            log_scales: r.v_log_scales,
+            quats: r.v_quats,
+            opacity_logits: r.v_opacity_logits,
+            sh: r.v_sh,
+        };
+        // Split children's means come from f32 normals on the GPU and f64 ones here.
+        for (k, (a, b)) in got.means.iter().zip(&want.means).enumerate() {
+            for c in 0..3 {
+                assert!(
+                    (a[c] - b[c]).abs() <= 1e-5 * (1.0 + b[c].abs()),
+                    "case {case}: mean {k}.{c}: {} vs {}",
+                    a[c],
+                    b[c]
+                );
+            }
+        }
+        for (k, (a, b)) in got.log_scales.iter().zip(&want.log_scales).enumerate() {
+            for c in 0..3 {
+                assert!(
+                    (a[c] - b[c]).abs() <= 1e-5,
+                    "case {case}: log-scale {k}.{c}: {} vs {}",
+                    a[c],
+                    b[c]
+                );
+            }
+        }
+        assert_eq!(got.quats, want.quats, "case {case}: quaternions");
+        assert_eq!(got.opacity_logits, want.opacity_logits, "case {case}");
+        assert_eq!(got.sh, want.sh, "case {case}: SH");
+        for (j, ((buffer, stride), (data, _))) in moment_gpu.iter().zip(&moments).enumerate() {
+            let stride = *stride as usize;
+            let live = &data[..n * stride];
+            let want = gather_rows(live, stride, &plan.origins, true);
+            let got: Vec<f32> = ctx.read(buffer, 2 * n * stride).unwrap();
+            let (live, buried) = got.split_at(want.len());
+            assert_eq!(live, want, "case {case}: moment buffer {j}");
+            assert!(
+                buried.iter().all(|&v| v == 0.0),
+                "case {case}: buried moments {j}"
+            );
+        }
+        // Rows past the new count up to 2n draw nothing.
+        let all: Vec<f32> = ctx.read(&params.opacity_logits, 2 * n).unwrap();
+        assert!(
+            all[counts[0] as usize..]
+                .iter()
+                .all(|&l| l == BURIED_OPACITY_LOGIT),
+            "case {case}: buried opacities"
+        );
+    }
 }

@@ -1,12 +1,16 @@
-//! The trainer's side of adaptive density control: read back, decide on the CPU
-//! (`plan_densify`), re-upload parameters and Adam moments in the new order.
+//! The trainer's side of adaptive density control: densification on the GPU in the step's
+//! own recorder (`GpuDensify`), the CPU rule (`plan_densify`) where the doubled set would not
+//! fit a binding, point addition and opacity resets.
 
-use cocog_engine::{AdamMoments, GpuContext, Kernel, ParamBuffers, shader};
+use cocog_engine::{
+    AdamMoments, GpuBuffer, GpuContext, Kernel, ParamBuffers, Recorder, sh_coeffs_per_channel,
+    shader,
+};
 
-use super::{Moments, Trainer};
+use super::{Moments, Pending, PendingCount, Trainer};
 use crate::{
-    DensifyConfig, DensifyPlan, Origin, TrainError, apply_plan, gather_rows, inverse_sigmoid,
-    plan_densify,
+    DensifyConfig, DensifyInputs, Origin, SplitNoise, TrainError, apply_plan, gather_rows,
+    inverse_sigmoid, plan_densify,
 };
 
 /// INRIA `reset_opacity` clamps every opacity to at most this.
@@ -34,24 +38,191 @@ fn regather(
     })
 }
 
-impl Trainer<'_> {
-    /// INRIA `densify_and_prune` at iteration `it`; statistics restart from zero afterwards.
-    pub(super) fn densify_and_prune(
+impl<'c> Trainer<'c> {
+    /// Whether densifying `n` Gaussians can run on the GPU: every group must hold 2n rows
+    /// within a buffer binding. Otherwise `densify_on_cpu` does it.
+    pub(super) fn densifies_on_gpu(&self, n: u32) -> bool {
+        let limits = self.ctx.device.limits();
+        let limit = limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size);
+        fits(u64::from(2 * n), self.sh_stride(), limit)
+    }
+
+    /// Floats of SH per Gaussian.
+    pub(super) fn sh_stride(&self) -> u32 {
+        3 * sh_coeffs_per_channel(self.sh_degree()) as u32
+    }
+
+    /// INRIA `densify_and_prune` at iteration `it`, recorded into the step's `rec` after its
+    /// statistics: no read-back and no submission. Until the new count comes back with a
+    /// later step's read-back (`apply_count`), steps train all 2n rows; those past the count
+    /// are buried and change nothing. Statistics restart from zero.
+    pub(super) fn densify_on_gpu(
+        &mut self,
+        rec: &mut Recorder<'c>,
+        params: &mut ParamBuffers,
+        config: &DensifyConfig,
+        it: u32,
+    ) -> Result<(), TrainError> {
+        self.settle_count(params)?;
+        let n = params.num_gaussians;
+        // `self.sh_degree()` is unknown while the step holds the parameters.
+        let sh = 3 * sh_coeffs_per_channel(params.sh_degree) as u32;
+        self.reserve_rows(rec, params, 2 * n, sh);
+        let m = &self.moments;
+        let moments: [(&GpuBuffer, u32); 10] = [
+            (&m.means.m, 3),
+            (&m.means.v, 3),
+            (&m.log_scales.m, 3),
+            (&m.log_scales.v, 3),
+            (&m.quats.m, 4),
+            (&m.quats.v, 4),
+            (&m.opacity_logits.m, 1),
+            (&m.opacity_logits.v, 1),
+            (&m.sh.m, sh),
+            (&m.sh.v, sh),
+        ];
+        let (accum, denom) = self.stats.buffers();
+        let inputs = DensifyInputs {
+            config,
+            scale: self.scene_scale,
+            prune_large: config.prunes_large_at(it),
+            noise: SplitNoise {
+                seed: self.config.seed,
+                iteration: it,
+            },
+            axis: &self.depth_axis,
+            accum,
+            denom,
+            moments: &moments,
+        };
+        let recorded = self.densify.record(rec, &mut self.ws, params, &inputs);
+        self.readback
+            .record(rec, &[(&recorded.counts, 0, 16)], Pending::Count)?;
+        self.pending_count = Some(PendingCount {
+            counts: recorded.counts,
+            before: n,
+        });
+        self.set_count(params, 2 * n);
+        self.stats.restart(rec, 2 * n);
+        Ok(())
+    }
+
+    /// Takes the count a densification left (words: after, kept, cloned, split) once it
+    /// arrived.
+    pub(super) fn apply_count(
+        &mut self,
+        params: &mut ParamBuffers,
+        words: &[u32],
+    ) -> Result<(), TrainError> {
+        let Some(pending) = self.pending_count.take() else {
+            return Ok(());
+        };
+        let after = words.first().copied().unwrap_or(0);
+        if after == 0 {
+            return Err(TrainError::Invalid(
+                "densification pruned every Gaussian".into(),
+            ));
+        }
+        self.set_count(params, after);
+        self.stats.truncate(after);
+        self.grow_capacity_with(pending.before);
+        Ok(())
+    }
+
+    /// Waits for a densification's count still on its way (outside a step's hot path:
+    /// checkpoints, point addition, SH growth, a second densification within a few steps).
+    pub(super) fn settle_count(&mut self, params: &mut ParamBuffers) -> Result<(), TrainError> {
+        if let Some(p) = &self.pending_count {
+            let words: Vec<u32> = self.ctx.read(&p.counts, 4)?;
+            self.apply_count(params, &words)?;
+        }
+        Ok(())
+    }
+
+    /// The Gaussians without the buried rows of a densification whose count is still on its
+    /// way (read now if so).
+    pub(super) fn exact_count(&self) -> Result<u32, TrainError> {
+        match &self.pending_count {
+            Some(p) => Ok(self.ctx.read::<u32>(&p.counts, 1)?[0]),
+            None => Ok(self.num_gaussians()),
+        }
+    }
+
+    /// `settle_count` on the trainer's own parameters.
+    pub(super) fn settle(&mut self) -> Result<(), TrainError> {
+        let mut batch = self.batch.take().ok_or(TrainError::Poisoned)?;
+        let result = self.settle_count(&mut batch.params);
+        self.batch = Some(batch);
+        result
+    }
+
+    fn set_count(&mut self, params: &mut ParamBuffers, n: u32) {
+        params.num_gaussians = n;
+        let sh = 3 * sh_coeffs_per_channel(params.sh_degree) as u32;
+        self.moments.set_count(n, sh);
+    }
+
+    /// Room for `rows` Gaussians in every parameter group, Adam moment and statistic; a buffer
+    /// short of it grows to a quarter beyond (copies recorded in `rec`, before the kernels that
+    /// read them). Groups are checked one by one: SH growth re-lays the SH buffers exactly.
+    fn reserve_rows(&mut self, rec: &mut Recorder<'c>, p: &mut ParamBuffers, rows: u32, sh: u32) {
+        let n = p.num_gaussians;
+        let limits = self.ctx.device.limits();
+        let limit = limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size);
+        let mut grown = u64::from(rows) + u64::from(rows) / 4;
+        if !fits(grown, sh, limit) {
+            grown = u64::from(rows);
+        }
+        let grown = grown as u32;
+        let ctx = self.ctx;
+        for (buffer, stride) in [
+            (&mut p.means, 3),
+            (&mut p.log_scales, 3),
+            (&mut p.quats, 4),
+            (&mut p.opacity_logits, 1),
+            (&mut p.sh, sh),
+        ] {
+            grow(rec, ctx, buffer, [n, rows, grown], stride);
+        }
+        let m = &mut self.moments;
+        for (moments, stride) in [
+            (&mut m.means, 3),
+            (&mut m.log_scales, 3),
+            (&mut m.quats, 4),
+            (&mut m.opacity_logits, 1),
+            (&mut m.sh, sh),
+        ] {
+            grow(rec, ctx, &mut moments.m, [n, rows, grown], stride);
+            grow(rec, ctx, &mut moments.v, [n, rows, grown], stride);
+        }
+        self.stats.reserve(rec, rows, grown);
+    }
+
+    /// The CPU reference of `densify_and_prune`: read back, `plan_densify`, upload again.
+    pub(super) fn densify_on_cpu(
         &mut self,
         config: &DensifyConfig,
         it: u32,
-    ) -> Result<DensifyPlan, TrainError> {
+    ) -> Result<(), TrainError> {
+        self.settle()?;
         let ctx = self.ctx;
         let g = self.gaussians()?;
         let grads = self.stats.read_mean(ctx)?;
-        let prune_large = config.prunes_large_at(it);
+        let noise = SplitNoise {
+            seed: self.config.seed,
+            iteration: it,
+        };
         let plan = plan_densify(
             &g,
             &grads,
             self.scene_scale,
-            prune_large,
+            config.prunes_large_at(it),
             config,
-            &mut self.rng,
+            &noise,
             Some(&self.depth_axis),
         );
         if plan.origins.is_empty() {
@@ -73,7 +244,7 @@ impl Trainer<'_> {
         self.stats.reset(ctx, params.num_gaussians);
         self.moments = moments;
         *self.params_mut()? = params;
-        Ok(plan)
+        Ok(())
     }
 
     /// Deblurring 3DGS's point addition (method.md §8.1): new Gaussians, every shape
@@ -82,6 +253,7 @@ impl Trainer<'_> {
     /// they restart there is a side effect of one optimizer holding everything. Returns how
     /// many points were added.
     pub(super) fn add_points(&mut self, config: &DensifyConfig) -> Result<usize, TrainError> {
+        self.settle()?;
         let ctx = self.ctx;
         let g = self.gaussians()?;
         let (dense, added) = crate::add_points(
@@ -97,29 +269,59 @@ impl Trainer<'_> {
         Ok(added)
     }
 
-    /// INRIA `reset_opacity`: opacity ≤ 0.01 everywhere, and fresh Adam moments for it, on
-    /// the GPU (queued behind this iteration's step).
+    /// INRIA `reset_opacity` in its own submission, queued behind this iteration's step.
     pub(super) fn reset_opacity(&mut self) -> Result<(), TrainError> {
-        let ctx = self.ctx;
-        let params = self.params()?;
+        let mut rec = self.ctx.recorder();
+        self.record_opacity_reset(&mut rec, self.params()?);
+        rec.submit();
+        Ok(())
+    }
+
+    /// Records INRIA `reset_opacity`: opacity ≤ 0.01 everywhere (buried rows stay buried),
+    /// and fresh Adam moments for it.
+    pub(super) fn record_opacity_reset(&self, rec: &mut Recorder, params: &ParamBuffers) {
         let n = params.num_gaussians;
-        let mut rec = ctx.recorder();
         let cap = rec.uniform(&ResetParams {
             n,
             cap: inverse_sigmoid(RESET_OPACITY),
             pad: [0; 2],
         });
         self.opacity_reset.dispatch_1d(
-            &mut rec,
+            rec,
             &[(0, &cap), (1, &params.opacity_logits)],
             n.div_ceil(256),
         );
         let m = &self.moments.opacity_logits;
         rec.encoder().clear_buffer(&m.m, 0, None);
         rec.encoder().clear_buffer(&m.v, 0, None);
-        rec.submit();
-        Ok(())
     }
+}
+
+/// Whether `rows` rows of the widest group (SH, or the 4-float rotations) fit `limit` bytes.
+fn fits(rows: u64, sh: u32, limit: u64) -> bool {
+    rows * u64::from(sh.max(4)) * 4 <= limit
+}
+
+/// Unless `buffer` holds `needed` rows of `stride` floats, replaces it by one of `grown` rows
+/// holding its first `live` rows.
+fn grow(
+    rec: &mut Recorder,
+    ctx: &GpuContext,
+    buffer: &mut GpuBuffer,
+    [live, needed, grown]: [u32; 3],
+    stride: u32,
+) {
+    let row = u64::from(stride) * 4;
+    if buffer.size() >= u64::from(needed) * row {
+        return;
+    }
+    let grown = ctx.storage("gaussian rows", u64::from(grown) * row);
+    let live = u64::from(live) * u64::from(stride) * 4;
+    if live > 0 {
+        rec.encoder()
+            .copy_buffer_to_buffer(buffer, 0, &grown, 0, live);
+    }
+    *buffer = grown;
 }
 
 #[repr(C)]

@@ -7,8 +7,14 @@ use crate::{
     GradStats, MomentState, SplitMix64, TrainConfig, TrainError, TrainState, TrainView, ViewOrder,
 };
 
-fn read_moments(ctx: &GpuContext, m: &AdamMoments) -> Result<MomentState, TrainError> {
-    let len = m.len as usize;
+/// The first `rows` Gaussians' moments (`stride` floats each).
+fn read_moments(
+    ctx: &GpuContext,
+    m: &AdamMoments,
+    rows: u32,
+    stride: u32,
+) -> Result<MomentState, TrainError> {
+    let len = (rows * stride).min(m.len) as usize;
     Ok(MomentState {
         m: ctx.read(&m.m, len)?,
         v: ctx.read(&m.v, len)?,
@@ -24,12 +30,15 @@ fn upload_moments(ctx: &GpuContext, s: &MomentState) -> AdamMoments {
 }
 
 impl<'c> Trainer<'c> {
-    /// Reads the whole optimisation state back (one sync per buffer); `downscale` is recorded
-    /// so a resume can refuse a different image size.
+    /// Reads the whole optimisation state back (one sync per buffer), without the buried rows
+    /// of a densification whose count is on its way; `downscale` is recorded so a resume can
+    /// refuse a different image size.
     pub fn snapshot(&self, downscale: u32) -> Result<TrainState, TrainError> {
         let ctx = self.ctx;
         let m = &self.moments;
-        let (grad_accum, grad_denom) = self.stats.read_raw(ctx)?;
+        let n = self.exact_count()?;
+        let sh = self.sh_stride();
+        let (grad_accum, grad_denom) = self.stats.read_raw(ctx, n)?;
         let (order_rng, stack) = self.order.state();
         Ok(TrainState {
             iteration: self.iteration,
@@ -37,11 +46,11 @@ impl<'c> Trainer<'c> {
             downscale,
             params: self.gaussians()?,
             moments: [
-                read_moments(ctx, &m.means)?,
-                read_moments(ctx, &m.log_scales)?,
-                read_moments(ctx, &m.quats)?,
-                read_moments(ctx, &m.opacity_logits)?,
-                read_moments(ctx, &m.sh)?,
+                read_moments(ctx, &m.means, n, 3)?,
+                read_moments(ctx, &m.log_scales, n, 3)?,
+                read_moments(ctx, &m.quats, n, 4)?,
+                read_moments(ctx, &m.opacity_logits, n, 1)?,
+                read_moments(ctx, &m.sh, n, sh)?,
             ],
             grad_accum,
             grad_denom,
