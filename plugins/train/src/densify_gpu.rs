@@ -36,14 +36,17 @@ struct GatherParams {
     stride: u32,
     mode: u32,
     bound: u32,
-    bury: u32,
-    bury_value: f32,
+    bury_first: f32,
+    bury_rest: f32,
     pad: [u32; 3],
 }
 
-/// The opacity logit of a buried row: sigmoid gives exactly 0, so projection culls it and no
-/// gradient reaches it.
-pub const BURIED_OPACITY_LOGIT: f32 = -1e30;
+/// The opacity logit of a buried row: an opacity of 9e-14, which projection culls (no pixel
+/// could reach 1/255), with every derivative still finite.
+pub const BURIED_OPACITY_LOGIT: f32 = -30.0;
+
+/// The log-scale of a buried row: a speck, should anything ever draw it.
+pub const BURIED_LOG_SCALE: f32 = -10.0;
 
 /// How `gather_rows` fills a group's new rows.
 #[derive(Clone, Copy)]
@@ -99,8 +102,9 @@ impl GpuDensify {
 
     /// Records densifying the first `params.num_gaussians` Gaussians of `params`, in place.
     /// Every group (and moment buffer) must have room for 2 × that many rows. Rows from the
-    /// new count to 2 × the old one are buried: opacity logit `BURIED_OPACITY_LOGIT`, Adam
-    /// moments 0, so a caller that does not know the count yet can train all of them.
+    /// new count to 2 × the old one are buried: mean 0, log-scales `BURIED_LOG_SCALE`, the
+    /// identity rotation, opacity logit `BURIED_OPACITY_LOGIT`, SH and Adam moments 0, so a
+    /// caller that does not know the count yet can train all of them.
     pub fn record(
         &self,
         rec: &mut Recorder,
@@ -161,24 +165,30 @@ impl GpuDensify {
         self.scan.encode(rec, ws, &survive, bound + 1);
 
         let sh_stride = 3 * sh_coeffs_per_channel(params.sh_degree) as u32;
-        let groups_and_modes: Vec<(&GpuBuffer, u32, Mode, Option<f32>)> = [
-            (&params.means, 3, Mode::Means, None),
-            (&params.log_scales, 3, Mode::LogScales, None),
-            (&params.quats, 4, Mode::Copy, None),
+        // (group, floats per row, how new rows fill, buried row's first and other floats)
+        let groups_and_modes: Vec<(&GpuBuffer, u32, Mode, [f32; 2])> = [
+            (&params.means, 3, Mode::Means, [0.0; 2]),
+            (
+                &params.log_scales,
+                3,
+                Mode::LogScales,
+                [BURIED_LOG_SCALE; 2],
+            ),
+            (&params.quats, 4, Mode::Copy, [1.0, 0.0]),
             (
                 &params.opacity_logits,
                 1,
                 Mode::Copy,
-                Some(BURIED_OPACITY_LOGIT),
+                [BURIED_OPACITY_LOGIT; 2],
             ),
-            (&params.sh, sh_stride, Mode::Copy, None),
+            (&params.sh, sh_stride, Mode::Copy, [0.0; 2]),
         ]
         .into_iter()
         .chain(
             inputs
                 .moments
                 .iter()
-                .map(|&(b, s)| (b, s, Mode::Moments, Some(0.0))),
+                .map(|&(b, s)| (b, s, Mode::Moments, [0.0; 2])),
         )
         .collect();
         let widest = groups_and_modes.iter().map(|g| g.1).max().unwrap_or(1);
@@ -197,8 +207,8 @@ impl GpuDensify {
                 stride,
                 mode: mode as u32,
                 bound,
-                bury: u32::from(bury.is_some()),
-                bury_value: bury.unwrap_or(0.0),
+                bury_first: bury[0],
+                bury_rest: bury[1],
                 pad: [0; 3],
             });
             self.gather.dispatch_1d(

@@ -12,11 +12,12 @@ struct Gather {
     // 2: log-scales (split children take theirs); 3: Adam moments (new Gaussians start at 0).
     mode: u32,
     bound: u32,
-    // Rows from the new count up to `bound` are set to `bury_value` when non-zero: the trainer
-    // may render and optimise up to `bound` rows until the count reaches the CPU, and buried
-    // rows must draw nothing (opacity logit -1e30) and move nothing (Adam moments 0).
-    bury: u32,
-    bury_value: f32,
+    // Rows from the new count up to `bound` are buried: their first float set to
+    // `bury_first`, the others to `bury_rest`. The trainer may render and optimise up to
+    // `bound` rows until the count reaches the CPU, so buried rows must be finite everywhere
+    // (CoCoGaussian's h_θ reads every row), draw nothing and move nothing.
+    bury_first: f32,
+    bury_rest: f32,
     pad0: u32,
     pad1: u32,
     pad2: u32,
@@ -36,9 +37,10 @@ fn gather_rows(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workg
         return;
     }
     let stride = params.stride;
-    if (params.bury != 0u && slot >= survive_slots[params.bound]) {
-        for (var k = 0u; k < stride; k++) {
-            rows_out[slot * stride + k] = params.bury_value;
+    if (slot >= survive_slots[params.bound]) {
+        rows_out[slot * stride] = params.bury_first;
+        for (var k = 1u; k < stride; k++) {
+            rows_out[slot * stride + k] = params.bury_rest;
         }
     }
     if (survive_slots[slot + 1u] == survive_slots[slot]) {

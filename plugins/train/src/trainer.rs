@@ -15,7 +15,10 @@ mod coc;
 mod coc_step;
 mod density;
 mod focus;
+mod sh_growth;
 mod snapshot;
+
+pub use sh_growth::{record_widen_sh, widen_kernel, widen_sh};
 
 /// Steps the CPU may run ahead of the GPU; their read-backs arrive this many steps late.
 const IN_FLIGHT: usize = 3;
@@ -208,6 +211,7 @@ pub struct Trainer<'c> {
     loss: ImageLoss,
     adam: Adam,
     opacity_reset: Kernel,
+    widen_sh: Kernel,
     cameras: Vec<Camera>,
     /// Per view, rgba f32 laid out like `ForwardState::rgba` (alpha unused by the loss).
     targets: Vec<GpuBuffer>,
@@ -308,6 +312,7 @@ impl<'c> Trainer<'c> {
             loss: ImageLoss::new(ctx),
             adam: Adam::new(ctx),
             opacity_reset: density::opacity_reset_kernel(ctx),
+            widen_sh: sh_growth::widen_kernel(ctx),
             densify: crate::GpuDensify::new(ctx),
             targets,
             v_depth: ctx.storage("v_depth", u64::from(w * h) * 4),
@@ -450,8 +455,9 @@ impl<'c> Trainer<'c> {
 
     /// One iteration: raise the SH degree if due, pick the next view, optimise on it, densify
     /// and reset opacities when due. Records one submission and waits for nothing but a step
-    /// `IN_FLIGHT` iterations old, except on SH-growth and point-addition iterations (still
-    /// done on the CPU) and densifications too large for a buffer binding.
+    /// `IN_FLIGHT` iterations old, except that SH growth adds a submission (and the wider
+    /// buffers), and that point addition and densifications too large for a buffer binding
+    /// go through the CPU.
     pub fn step(&mut self) -> Result<StepStats, TrainError> {
         let it = self.iteration + 1;
         let mut watch = Stopwatch::new(self.profiling);
@@ -752,38 +758,6 @@ impl<'c> Trainer<'c> {
         let sh_lr = lr(c.feature_lr).interleaved(coeffs, c.feature_rest_lr());
         self.adam.encode(rec, &p.sh, v[4], &m.sh, &sh_lr, it, skip);
     }
-
-    /// Re-lays the SH buffer and its Adam moments out for `degree`, new coefficients zero.
-    /// INRIA allocates degree 3 up front and masks; the result is the same because masked
-    /// coefficients get zero gradients, so their parameters and moments stay zero until used.
-    fn raise_sh_degree(&mut self, degree: u32) -> Result<(), TrainError> {
-        self.settle()?;
-        let ctx = self.ctx;
-        let params = self
-            .batch
-            .as_mut()
-            .map(|b| &mut b.params)
-            .ok_or(TrainError::Poisoned)?;
-        let n = params.num_gaussians as usize;
-        let (old_k, new_k) = (
-            sh_coeffs_per_channel(params.sh_degree),
-            sh_coeffs_per_channel(degree),
-        );
-        let widen = |buf: &wgpu::Buffer, label: &str| -> Result<GpuBuffer, TrainError> {
-            let old: Vec<f32> = ctx.read(buf, n * 3 * old_k)?;
-            Ok(ctx.storage_from(label, &widen_sh(&old, old_k, new_k)))
-        };
-        let sh = widen(&params.sh, "sh")?;
-        let moments = AdamMoments {
-            m: widen(&self.moments.sh.m, "adam m")?,
-            v: widen(&self.moments.sh.v, "adam v")?,
-            len: (n * 3 * new_k) as u32,
-        };
-        params.sh = sh;
-        params.sh_degree = degree;
-        self.moments.sh = moments;
-        Ok(())
-    }
 }
 
 /// The optimisation state a trainer starts from: fresh in `new`, a checkpoint in `resume`.
@@ -876,33 +850,4 @@ struct Plan {
     gather_stats: bool,
     densify: bool,
     reset_opacity: bool,
-}
-
-/// Copies per-channel SH blocks of `old_k` coefficients into blocks of `new_k`, zero-filled.
-pub(crate) fn widen_sh(old: &[f32], old_k: usize, new_k: usize) -> Vec<f32> {
-    let mut out = vec![0.0; old.len() / old_k * new_k];
-    for (src, dst) in old.chunks_exact(old_k).zip(out.chunks_exact_mut(new_k)) {
-        dst[..old_k].copy_from_slice(src);
-    }
-    out
-}
-
-#[cfg(test)]
-mod tests {
-    use super::widen_sh;
-
-    #[test]
-    fn widening_keeps_each_channel_block_in_place() {
-        // Two Gaussians × 3 channels at degree 0 (1 coefficient) → degree 1 (4).
-        let old = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0];
-        let new = widen_sh(&old, 1, 4);
-        assert_eq!(new.len(), 24);
-        for (i, v) in old.iter().enumerate() {
-            assert_eq!(new[4 * i], *v);
-            assert_eq!(&new[4 * i + 1..4 * i + 4], &[0.0; 3]);
-        }
-        let again = widen_sh(&new, 4, 9);
-        assert_eq!(again[9 * 5], 6.0);
-        assert_eq!(again.len(), 54);
-    }
 }

@@ -6,8 +6,8 @@ mod common;
 
 use cocog_engine::{Batch, GaussianParams, ImageLoss, ParamBuffers, Renderer, View, Workspace};
 use cocog_train::{
-    BURIED_OPACITY_LOGIT, DensifyConfig, DensifyInputs, DepthAxis, GpuDensify, GradStats,
-    SplitMix64, SplitNoise, TrainConfig, Trainer, apply_plan, gather_rows, plan_densify,
+    BURIED_LOG_SCALE, BURIED_OPACITY_LOGIT, DensifyConfig, DensifyInputs, DepthAxis, GpuDensify,
+    GradStats, SplitMix64, SplitNoise, TrainConfig, Trainer, apply_plan, gather_rows, plan_densify,
 };
 use common::*;
 
@@ -347,13 +347,27 @@ fn gpu_densification_makes_the_cpu_rules_decisions() {
                 "case {case}: buried moments {j}"
             );
         }
-        // Rows past the new count up to 2n draw nothing.
-        let all: Vec<f32> = ctx.read(&params.opacity_logits, 2 * n).unwrap();
+        // Rows past the new count up to 2n are finite and draw nothing.
+        let after = counts[0] as usize;
+        params.num_gaussians = 2 * n as u32;
+        let buried = params.read_grads(ctx, 0, 2 * n as u32).unwrap();
+        assert!(buried.v_means[after..].iter().all(|m| *m == [0.0; 3]));
         assert!(
-            all[counts[0] as usize..]
+            buried.v_log_scales[after..]
                 .iter()
-                .all(|&l| l == BURIED_OPACITY_LOGIT),
+                .all(|l| *l == [BURIED_LOG_SCALE; 3])
+        );
+        assert!(
+            buried.v_quats[after..]
+                .iter()
+                .all(|q| *q == [1.0, 0.0, 0.0, 0.0])
+        );
+        assert!(
+            buried.v_opacity_logits[after..]
+                .iter()
+                .all(|&l| l == BURIED_OPACITY_LOGIT && 255.0 / (1.0 + (-l).exp()) < 1.0),
             "case {case}: buried opacities"
         );
+        assert!(buried.v_sh[12 * after..].iter().all(|&v| v == 0.0));
     }
 }
