@@ -13,6 +13,11 @@ pub enum EngineError {
     Device(#[from] wgpu::RequestDeviceError),
     #[error("GPU readback failed: {0}")]
     Readback(String),
+    #[error(
+        "one image needs {needed} tile intersections and a buffer binding holds {most}: render \
+         it in bands of rows (`Renderer::render_frame`) or with fewer, smaller Gaussians"
+    )]
+    TooManyIntersections { needed: u32, most: u32 },
     #[error("invalid input: {0}")]
     Invalid(String),
 }

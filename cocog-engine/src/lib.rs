@@ -58,7 +58,9 @@ pub use prims::{
     Adam, AdamConfig, AdamMoments, Gemm, GemmLayout, GemmShape, GemmTile, ImageLoss, LossOutput,
     LossValue, PrefixSum, RadixSort, SortBuffers, SortCount,
 };
-pub use splat::{Batch, ForwardState, Gradients, ImageSpec, ParamBuffers, RenderedImage, Renderer};
+pub use splat::{
+    Batch, Crop, ForwardState, Frame, Gradients, ImageSpec, ParamBuffers, RenderedImage, Renderer,
+};
 pub use types::{
     ALPHA_MAX, ALPHA_MIN, Camera, GaussianGrads, GaussianParams, LOW_PASS, MAX_SH_DEGREE,
     NEAR_PLANE, T_MIN, TILE_SIZE, View, sh_coeffs_per_channel,

@@ -83,7 +83,8 @@ impl<'c> Refocus<'c> {
         })
     }
 
-    /// The base Gaussians alone (what aperture 0 gives, and what test views are scored on).
+    /// The base Gaussians alone (what aperture 0 gives, and what test views are scored on), at
+    /// any size: in bands of rows where the frame outgrows a buffer binding.
     pub fn render_sharp(
         &mut self,
         camera: &Camera,
@@ -96,16 +97,12 @@ impl<'c> Refocus<'c> {
             background,
             first: 0,
             count: n,
+            crop: None,
         };
-        let batch = Batch::new(self.ctx, base, vec![spec])?;
-        let result = self
-            .renderer
-            .forward(self.ctx, &batch)
-            .and_then(|state| state.read_images(self.ctx, &batch));
+        let mut batch = Batch::new(self.ctx, base, vec![spec])?;
+        let result = self.renderer.render_frame(self.ctx, &mut batch, spec);
         self.base = Some(batch.params);
-        result?
-            .pop()
-            .ok_or_else(|| EngineError::Invalid("the renderer returned no image".into()))
+        Ok(result?.image)
     }
 
     /// The view from `camera` through `lens`. Depth is the base Gaussians' (the surface in
@@ -170,6 +167,7 @@ impl<'c> Refocus<'c> {
                 background,
                 first: s * n,
                 count: n,
+                crop: None,
             })
             .collect();
         let batch = Batch::new(ctx, sets, specs)?;

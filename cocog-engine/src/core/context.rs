@@ -193,6 +193,15 @@ impl GpuContext {
             .map_err(|e| EngineError::Readback(e.to_string()))
     }
 
+    /// Bytes one storage-buffer binding may span on this device: the smaller of the binding
+    /// and buffer limits (lavapipe: 128 MiB).
+    pub fn binding_limit(&self) -> u64 {
+        let limits = self.device.limits();
+        limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size)
+    }
+
     /// "name (backend, device type)", for logs and benchmark reports.
     pub fn adapter_name(&self) -> String {
         let i = &self.adapter_info;

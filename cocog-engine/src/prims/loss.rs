@@ -178,9 +178,7 @@ impl ImageLoss {
         let pixels = width * height * num_images;
         let taps = window();
         let inv_n = 1.0 / (3.0 * f64::from(pixels));
-        let limit = self
-            .binding_limit
-            .unwrap_or(ctx.device.limits().max_storage_buffer_binding_size);
+        let limit = self.binding_limit.unwrap_or_else(|| ctx.binding_limit());
         let bands = self.bands(limit, width, height, num_images);
         let scratch_px = |b: &Band| width * b.rows * b.num_images;
         let largest = bands.iter().map(scratch_px).max().unwrap_or(0);

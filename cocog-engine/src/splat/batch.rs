@@ -14,7 +14,8 @@ pub(crate) struct ImageInfo {
     background: [f32; 4],
     first: u32,
     count: u32,
-    pad: [u32; 2],
+    /// cy and height of the whole frame, whose edges bound the projection's clamp.
+    frame: [f32; 2],
 }
 
 /// Gaussian parameters of all images of a batch, concatenated in image order, one buffer per
@@ -132,6 +133,57 @@ pub struct ImageSpec {
     pub background: [f32; 3],
     pub first: u32,
     pub count: u32,
+    /// `Some` when `camera` sees a band of rows cut from a taller frame (`ImageSpec::rows`).
+    pub crop: Option<Crop>,
+}
+
+/// Where a band of rows sits in the frame it was cut from. The projection clamps each
+/// footprint's centre against the frame's edges, not the band's, so that bands rendered one
+/// by one give the pixels of the whole frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Crop {
+    pub first_row: u32,
+    pub frame_height: u32,
+}
+
+impl ImageSpec {
+    /// Rows `first_row..first_row + rows` of this image, as an image of their own.
+    pub fn rows(&self, first_row: u32, rows: u32) -> ImageSpec {
+        let outer = self.crop.unwrap_or(Crop {
+            first_row: 0,
+            frame_height: self.camera.height,
+        });
+        let mut camera = self.camera;
+        camera.cy -= f64::from(first_row);
+        camera.height = rows;
+        ImageSpec {
+            camera,
+            crop: Some(Crop {
+                first_row: outer.first_row + first_row,
+                frame_height: outer.frame_height,
+            }),
+            ..*self
+        }
+    }
+
+    /// (cy, height) of the whole frame this image belongs to.
+    fn frame(&self) -> Result<(f64, u32), EngineError> {
+        let cam = &self.camera;
+        match self.crop {
+            None => Ok((cam.cy, cam.height)),
+            Some(c)
+                if u64::from(c.first_row) + u64::from(cam.height) <= u64::from(c.frame_height) =>
+            {
+                Ok((cam.cy + f64::from(c.first_row), c.frame_height))
+            }
+            Some(c) => Err(EngineError::Invalid(format!(
+                "a band of rows {}..{} does not fit its frame of {} rows",
+                c.first_row,
+                u64::from(c.first_row) + u64::from(cam.height),
+                c.frame_height
+            ))),
+        }
+    }
 }
 
 /// The GPU records of `images`, checked against each other and against `params`.
@@ -157,6 +209,7 @@ fn image_infos(params: &ParamBuffers, images: &[ImageSpec]) -> Result<Vec<ImageI
                 "image Gaussian range exceeds the parameters".into(),
             ));
         }
+        let (frame_cy, frame_height) = im.frame()?;
         let (r, t) = im.camera.camera_from_world();
         let c = im.camera.centre();
         let cam = &im.camera;
@@ -169,7 +222,7 @@ fn image_infos(params: &ParamBuffers, images: &[ImageSpec]) -> Result<Vec<ImageI
             background: [im.background[0], im.background[1], im.background[2], 0.0],
             first: im.first,
             count: im.count,
-            pad: [0; 2],
+            frame: [frame_cy as f32, frame_height as f32],
         });
     }
     Ok(infos)
@@ -239,6 +292,7 @@ impl Batch {
                     background: v.background,
                     first,
                     count,
+                    crop: None,
                 };
                 first += count;
                 spec

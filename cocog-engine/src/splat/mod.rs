@@ -2,9 +2,11 @@
 //! its backward pass.
 
 mod batch;
+mod frame;
 mod renderer;
 mod state;
 
-pub use batch::{Batch, ImageSpec, ParamBuffers};
+pub use batch::{Batch, Crop, ImageSpec, ParamBuffers};
+pub use frame::Frame;
 pub use renderer::Renderer;
 pub use state::{ForwardState, Gradients, RenderedImage};

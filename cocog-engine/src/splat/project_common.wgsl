@@ -23,8 +23,9 @@ struct ImageInfo {
     background: vec4<f32>,
     first: u32,
     count: u32,
-    pad0: u32,
-    pad1: u32,
+    // cy and height of the whole frame: a band of rows clamps against the frame's edges.
+    frame_cy: f32,
+    frame_height: f32,
 }
 
 @group(0) @binding(0) var<uniform> globals: Globals;
@@ -167,10 +168,11 @@ fn project_forward(g: u32) -> Fwd {
     let m = f.rot * mat3x3<f32>(vec3<f32>(f.s.x, 0.0, 0.0), vec3<f32>(0.0, f.s.y, 0.0), vec3<f32>(0.0, 0.0, f.s.z));
     f.cov3 = m * transpose(m);
     let width = f32(globals.width);
-    let height = f32(globals.height);
+    let height = info.frame_height;
+    let fcy = info.frame_cy;
     let z = f.t.z;
     let uc = clamp_ratio(f.t.x / z, (cx + 0.3 * width) / fx, (width - cx + 0.3 * width) / fx);
-    let vc = clamp_ratio(f.t.y / z, (cy + 0.3 * height) / fy, (height - cy + 0.3 * height) / fy);
+    let vc = clamp_ratio(f.t.y / z, (fcy + 0.3 * height) / fy, (height - fcy + 0.3 * height) / fy);
     f.uc = uc.x;
     f.u_clamped = uc.y > 0.5;
     f.vc = vc.x;

@@ -53,6 +53,8 @@ pub struct Renderer {
     check_capacity: Kernel,
     rasterize: Kernel,
     rasterize_backward: Kernel,
+    /// Overrides the device's binding limit (tests of the banded paths at small sizes).
+    binding_limit: Option<u64>,
 }
 
 fn groups(n: u32) -> u32 {
@@ -118,7 +120,25 @@ impl Renderer {
             check_capacity: Kernel::new(ctx, &tiles, "check_capacity"),
             rasterize: Kernel::new(ctx, &raster, "rasterize"),
             rasterize_backward: Kernel::new(ctx, &raster_bwd, "rasterize_backward"),
+            binding_limit: None,
         }
+    }
+
+    /// Plans for at most `bytes` per buffer binding instead of the device's limit.
+    pub fn with_binding_limit(mut self, bytes: u64) -> Self {
+        self.binding_limit = Some(bytes);
+        self
+    }
+
+    /// Bytes one buffer binding may span: the device's limit unless overridden.
+    pub fn binding_limit(&self, ctx: &GpuContext) -> u64 {
+        self.binding_limit.unwrap_or_else(|| ctx.binding_limit())
+    }
+
+    /// Most (tile, Gaussian) intersections one forward pass holds: its key and value
+    /// buffers (a u32 each) must each fit one binding.
+    pub fn max_intersections(&self, ctx: &GpuContext) -> u32 {
+        u32::try_from(self.binding_limit(ctx) / 4).unwrap_or(u32::MAX)
     }
 
     fn globals(batch: &Batch) -> Globals {
@@ -147,10 +167,17 @@ impl Renderer {
 
     /// Renders every image of `batch` into buffers of its own. Sizes the intersection
     /// buffers by reading the count back (one or two blocking reads); the images stay on the
-    /// GPU. Training loops use `encode_forward`, which never waits.
+    /// GPU. Training loops use `encode_forward`, which never waits. Fails with
+    /// `TooManyIntersections` when the intersections outgrow a binding.
     pub fn forward(&self, ctx: &GpuContext, batch: &Batch) -> Result<ForwardState, EngineError> {
         let mut ws = Workspace::default();
-        let mut capacity = batch.params.num_gaussians.saturating_mul(4).max(1024);
+        let most = self.max_intersections(ctx);
+        let mut capacity = batch
+            .params
+            .num_gaussians
+            .saturating_mul(4)
+            .max(1024)
+            .min(most);
         loop {
             let mut rec = ctx.recorder();
             let mut state = self.encode_forward(&mut rec, &mut ws, batch, capacity);
@@ -162,6 +189,9 @@ impl Renderer {
             if k <= capacity {
                 state.num_intersections = k;
                 return Ok(state);
+            }
+            if k > most {
+                return Err(EngineError::TooManyIntersections { needed: k, most });
             }
             capacity = k;
         }

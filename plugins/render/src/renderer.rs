@@ -31,7 +31,8 @@ impl<'c> SceneRenderer<'c> {
         })
     }
 
-    /// Colour, alpha and expected depth (Σ wᵢ·zᵢ, not divided by alpha) seen by `camera`.
+    /// Colour, alpha and expected depth (Σ wᵢ·zᵢ, not divided by alpha) seen by `camera`, at
+    /// any size: a frame too large for one buffer binding renders in bands of rows.
     pub fn render(&mut self, camera: &Camera) -> Result<RenderedImage, EngineError> {
         let params = self
             .params
@@ -42,16 +43,12 @@ impl<'c> SceneRenderer<'c> {
             background: self.background,
             first: 0,
             count: params.num_gaussians,
+            crop: None,
         };
-        let batch = Batch::new(self.ctx, params, vec![spec])?;
-        let result = self
-            .renderer
-            .forward(self.ctx, &batch)
-            .and_then(|state| state.read_images(self.ctx, &batch));
+        let mut batch = Batch::new(self.ctx, params, vec![spec])?;
+        let result = self.renderer.render_frame(self.ctx, &mut batch, spec);
         self.params = Some(batch.params);
-        result?
-            .pop()
-            .ok_or_else(|| EngineError::Invalid("the renderer returned no image".into()))
+        Ok(result?.image)
     }
 }
 

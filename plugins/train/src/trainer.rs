@@ -304,6 +304,7 @@ impl<'c> Trainer<'c> {
             background: config.background,
             first: 0,
             count: state.params.num_gaussians,
+            crop: None,
         };
         let batch = Batch::new(ctx, state.params, vec![spec])?;
         let mut trainer = Self {
@@ -565,6 +566,7 @@ impl<'c> Trainer<'c> {
             background,
             first: 0,
             count: batch.params.num_gaussians,
+            crop: None,
         };
         Ok(batch.set_images(self.ctx, vec![spec])?)
     }
@@ -791,7 +793,7 @@ fn depth_axis(cameras: &[Camera]) -> crate::DepthAxis {
 /// lens-variant CoCoGaussian step at 1.4 Mpixel), instead of failing in the first step. The loss works in bands of rows and
 /// needs no check.
 fn check_binding_size(ctx: &GpuContext, w: u32, h: u32, sets: u32) -> Result<(), TrainError> {
-    let limit = ctx.device.limits().max_storage_buffer_binding_size;
+    let limit = ctx.binding_limit();
     let need = 16 * u64::from(w) * u64::from(h) * u64::from(sets);
     if need > limit {
         let mib = |b: u64| b as f64 / f64::from(1 << 20);

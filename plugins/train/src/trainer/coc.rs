@@ -298,6 +298,7 @@ impl CocState {
                 background,
                 first: m * n,
                 count: n,
+                crop: None,
             })
             .collect();
         match slot {

@@ -42,10 +42,7 @@ impl<'c> Trainer<'c> {
     /// Whether densifying `n` Gaussians can run on the GPU: every group must hold 2n rows
     /// within a buffer binding. Otherwise `densify_on_cpu` does it.
     pub(super) fn densifies_on_gpu(&self, n: u32) -> bool {
-        let limits = self.ctx.device.limits();
-        let limit = limits
-            .max_storage_buffer_binding_size
-            .min(limits.max_buffer_size);
+        let limit = self.ctx.binding_limit();
         fits(u64::from(2 * n), self.sh_stride(), limit)
     }
 
@@ -169,10 +166,7 @@ impl<'c> Trainer<'c> {
     /// read them). Groups are checked one by one: SH growth re-lays the SH buffers exactly.
     fn reserve_rows(&mut self, rec: &mut Recorder<'c>, p: &mut ParamBuffers, rows: u32, sh: u32) {
         let n = p.num_gaussians;
-        let limits = self.ctx.device.limits();
-        let limit = limits
-            .max_storage_buffer_binding_size
-            .min(limits.max_buffer_size);
+        let limit = self.ctx.binding_limit();
         let mut grown = u64::from(rows) + u64::from(rows) / 4;
         if !fits(grown, sh, limit) {
             grown = u64::from(rows);
