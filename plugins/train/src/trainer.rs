@@ -10,6 +10,7 @@ use cocog_engine::{
 
 use crate::{GradStats, SplitMix64, TrainConfig, TrainError, ViewOrder, scene_extent};
 
+mod binding;
 mod capacity;
 mod coc;
 mod coc_step;
@@ -280,8 +281,8 @@ impl<'c> Trainer<'c> {
         state: Resumed,
     ) -> Result<Self, TrainError> {
         let (w, h) = (views[0].camera.width, views[0].camera.height);
-        let sets = config.coc.as_ref().map_or(1, |c| c.net.copies + 1);
-        check_binding_size(ctx, w, h, sets)?;
+        binding::check(w, h, &config, ctx.binding_limit(), &ctx.adapter_name())
+            .map_err(TrainError::Invalid)?;
         let cameras: Vec<Camera> = views.iter().map(|v| v.camera).collect();
         let scene_scale = match config.scene_scale {
             Some(s) if s.is_finite() && s > 0.0 => s,
@@ -788,28 +789,6 @@ fn depth_axis(cameras: &[Camera]) -> crate::DepthAxis {
 }
 
 /// Views share one resolution and match their images; the Gaussians fit the SH limit.
-/// Refuses, before any GPU work, photos whose per-pixel buffers one binding cannot cover on
-/// this adapter (lavapipe binds at most 128 MiB: one rgba render of 8.4 Mpixel, or the six of a
-/// lens-variant CoCoGaussian step at 1.4 Mpixel), instead of failing in the first step. The loss works in bands of rows and
-/// needs no check.
-fn check_binding_size(ctx: &GpuContext, w: u32, h: u32, sets: u32) -> Result<(), TrainError> {
-    let limit = ctx.binding_limit();
-    let need = 16 * u64::from(w) * u64::from(h) * u64::from(sets);
-    if need > limit {
-        let mib = |b: u64| b as f64 / f64::from(1 << 20);
-        let scale = (need as f64 / limit as f64).sqrt().ceil();
-        return Err(TrainError::Invalid(format!(
-            "{w}×{h} photos need a {:.0} MiB GPU buffer binding ({sets} rgba render{}), and {} \
-             binds at most {:.0} MiB: train on smaller images (--downscale {scale} or more)",
-            mib(need),
-            if sets == 1 { "" } else { "s" },
-            ctx.adapter_name(),
-            mib(limit)
-        )));
-    }
-    Ok(())
-}
-
 fn check_inputs(
     init: &GaussianParams,
     views: &[TrainView],
