@@ -8,5 +8,5 @@ mod state;
 
 pub use batch::{Batch, Crop, ImageSpec, ParamBuffers};
 pub use frame::Frame;
-pub use renderer::Renderer;
+pub use renderer::{QUAT_TO_ROT_WGSL, Renderer};
 pub use state::{ForwardState, Gradients, RenderedImage};

@@ -7,6 +7,10 @@ use crate::core::{GpuContext, Kernel, Recorder, Workspace, shader};
 use crate::prims::{PrefixSum, RadixSort, SortBuffers, SortCount};
 use crate::types::sh_coeffs_per_channel;
 
+/// WGSL of `quat_to_rot(q: vec4<f32>) -> mat3x3<f32>`, the rotation of a unit (w, x, y, z)
+/// quaternion, for shaders outside the engine that need the renderer's exact convention.
+pub const QUAT_TO_ROT_WGSL: &str = include_str!("quat.wgsl");
+
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct Globals {
@@ -71,7 +75,10 @@ impl Renderer {
     /// compare-exchange fallback and `subgroups = false` per-pixel atomics (to test those
     /// paths on devices that have more); `true` is ignored where the device lacks the feature.
     pub fn with_options(ctx: &GpuContext, native_atomics: bool, subgroups: bool) -> Self {
-        let common = include_str!("project_common.wgsl");
+        let common = format!(
+            "{QUAT_TO_ROT_WGSL}\n{}",
+            include_str!("project_common.wgsl")
+        );
         let tile_test = include_str!("tile_test.wgsl");
         let project = shader(
             ctx,

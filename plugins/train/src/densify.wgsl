@@ -97,19 +97,10 @@ fn split_normal(i: u32, child: u32, axis: u32) -> f32 {
     return sqrt(-2.0 * log(u1)) * cos(TAU * u2);
 }
 
+// quat_to_rot comes from the engine (cocog_engine::splat::QUAT_TO_ROT_WGSL), prepended.
 fn rotation(i: u32) -> mat3x3<f32> {
-    var q = vec4<f32>(quats[4u * i], quats[4u * i + 1u], quats[4u * i + 2u], quats[4u * i + 3u]);
-    q = q / max(length(q), 1e-12);
-    let w = q.x;
-    let x = q.y;
-    let y = q.z;
-    let z = q.w;
-    // Columns of the row-major matrix of reference::quat_to_rot.
-    return mat3x3<f32>(
-        vec3<f32>(1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y + w * z), 2.0 * (x * z - w * y)),
-        vec3<f32>(2.0 * (x * y - w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z + w * x)),
-        vec3<f32>(2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y)),
-    );
+    let q = vec4<f32>(quats[4u * i], quats[4u * i + 1u], quats[4u * i + 2u], quats[4u * i + 3u]);
+    return quat_to_rot(q / max(length(q), 1e-12));
 }
 
 fn depth(p: vec3<f32>) -> f32 {

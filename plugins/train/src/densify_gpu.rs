@@ -3,6 +3,7 @@
 //! Adam moment rearranged in place, without a read-back or a new buffer once the workspace
 //! has grown. The caller guarantees room for twice the Gaussians in every group.
 
+use cocog_engine::splat::QUAT_TO_ROT_WGSL;
 use cocog_engine::{
     GpuBuffer, GpuContext, Kernel, ParamBuffers, PrefixSum, Recorder, Workspace,
     sh_coeffs_per_channel, shader,
@@ -89,7 +90,8 @@ pub struct GpuDensify {
 
 impl GpuDensify {
     pub fn new(ctx: &GpuContext) -> Self {
-        let module = shader(ctx, "densify", include_str!("densify.wgsl"));
+        let src = format!("{QUAT_TO_ROT_WGSL}\n{}", include_str!("densify.wgsl"));
+        let module = shader(ctx, "densify", &src);
         let gather = shader(ctx, "gather rows", include_str!("gather_rows.wgsl"));
         Self {
             classify: Kernel::new(ctx, &module, "classify"),
