@@ -95,7 +95,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let state = renderer.forward(&ctx, &batch)?;
         ctx.wait()?;
         let t1 = Instant::now();
-        let grads = renderer.backward(&ctx, &batch, &state, &v_rgba, &v_depth);
+        let grads = renderer.backward(&ctx, &batch, &state, &v_rgba, Some(&v_depth));
         ctx.wait()?;
         let t2 = Instant::now();
         drop(grads);

@@ -16,12 +16,11 @@
 //! let batch = Batch::from_views(ctx, views)?;
 //! let (w, h, n) = (batch.width(), batch.height(), batch.num_images());
 //! let mut ws = Workspace::default();
-//! let v_depth = ctx.storage("v_depth", u64::from(w * h * n) * 4);
 //! let moments = AdamMoments::new(ctx, 3 * batch.params.num_gaussians);
 //! let mut rec = ctx.recorder();
 //! let state = renderer.encode_forward(&mut rec, &mut ws, &batch, 1 << 20);
 //! let out = loss.compute(&mut rec, &mut ws, &state.rgba, target, w, h, n, 0.2);
-//! let grads = renderer.encode_backward(&mut rec, &mut ws, &batch, &state, &out.v_pred, &v_depth);
+//! let grads = renderer.encode_backward(&mut rec, &mut ws, &batch, &state, &out.v_pred, None);
 //! let lr = AdamConfig::with_lr(1.6e-4);
 //! // An overflowed intersection buffer (state.status) makes the update a no-op on the GPU.
 //! let (p, g) = (&batch.params.means, &grads.params.means);

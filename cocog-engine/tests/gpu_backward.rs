@@ -18,11 +18,23 @@ fn group_names(g: &GaussianParams) -> Vec<&'static str> {
 }
 
 fn check(ctx: &GpuContext, renderer: &Renderer, views: &[View<'_>], seed: u64) {
+    check_with(ctx, renderer, views, seed, true);
+}
+
+/// `depth = false`: the loss has no depth term, so the backward runs without its depth channel
+/// (`v_depth: None`) and the reference sees zero depth weights.
+fn check_with(ctx: &GpuContext, renderer: &Renderer, views: &[View<'_>], seed: u64, depth: bool) {
     let batch = Batch::from_views(ctx, views).unwrap();
     let state = renderer.forward(ctx, &batch).unwrap();
     let npix = (batch.width() * batch.height()) as usize;
     let weights: Vec<_> = (0..views.len())
-        .map(|i| random_weights(npix, seed + i as u64))
+        .map(|i| {
+            let mut w = random_weights(npix, seed + i as u64);
+            if !depth {
+                w.2.fill(0.0);
+            }
+            w
+        })
         .collect();
     let v_rgba: Vec<[f32; 4]> = weights
         .iter()
@@ -38,7 +50,7 @@ fn check(ctx: &GpuContext, renderer: &Renderer, views: &[View<'_>], seed: u64) {
         .collect();
     let v_rgba = ctx.storage_from("v_rgba", &v_rgba);
     let v_depth = ctx.storage_from("v_depth", &v_depth);
-    let grads = renderer.backward(ctx, &batch, &state, &v_rgba, &v_depth);
+    let grads = renderer.backward(ctx, &batch, &state, &v_rgba, depth.then_some(&*v_depth));
     for (i, view) in views.iter().enumerate() {
         let spec = batch.images[i];
         let gpu = grads
@@ -61,6 +73,9 @@ fn check(ctx: &GpuContext, renderer: &Renderer, views: &[View<'_>], seed: u64) {
             .map(|v| v.v_mean2d[0].abs())
             .fold(0.0, f64::max);
         for (k, (gv, cv)) in v_proj_gpu.iter().zip(&v_proj_cpu).enumerate() {
+            if !depth {
+                assert_eq!(gv[9], 0.0, "v_depth[{k}] without a depth channel");
+            }
             for (&a, &b) in gv[..2].iter().zip(&cv.v_mean2d) {
                 let a = f64::from(a);
                 assert!(
@@ -158,4 +173,22 @@ fn batched_backward_keeps_images_apart() {
         })
         .collect();
     check(ctx, &renderer, &views, 5);
+}
+
+#[test]
+fn backward_without_the_depth_channel_matches_reference() {
+    let Some(ctx) = gpu() else { return };
+    // Both accumulation paths: native atomics and subgroup sums, compare-exchange per pixel.
+    for (renderer, seed) in [
+        (Renderer::new(ctx), 21),
+        (Renderer::with_options(ctx, false, false), 22),
+    ] {
+        let (g, cam) = one_image(3, 60, seed);
+        let view = View {
+            gaussians: &g,
+            camera: &cam,
+            background: [0.3, 0.6, 0.1],
+        };
+        check_with(ctx, &renderer, &[view], seed + 100, false);
+    }
 }

@@ -44,7 +44,6 @@ fn optimising_all_parameters_reduces_the_loss() {
     let lens = [3 * n, 3 * n, 4 * n, n, 12 * n];
     let moments: Vec<AdamMoments> = lens.iter().map(|&len| AdamMoments::new(ctx, len)).collect();
     let configs = [0.002, 0.01, 0.01, 0.05, 0.01].map(AdamConfig::with_lr);
-    let v_depth = ctx.storage("v_depth", 64 * 48 * 4);
     let mut losses = Vec::new();
     for step in 1..=60 {
         let state = renderer.forward(ctx, &batch).unwrap();
@@ -55,7 +54,7 @@ fn optimising_all_parameters_reduces_the_loss() {
         if step == 1 || step == 60 {
             losses.push(out.read_loss(ctx).unwrap());
         }
-        let grads = renderer.backward(ctx, &batch, &state, &out.v_pred, &v_depth);
+        let grads = renderer.backward(ctx, &batch, &state, &out.v_pred, None);
         let g = &grads.params;
         let pairs = [
             (&p.means, &g.means),

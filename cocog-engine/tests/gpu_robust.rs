@@ -81,7 +81,7 @@ fn non_finite_and_degenerate_gaussians_are_contained() {
         &batch,
         &state,
         &ctx.storage_from("v_rgba", &v_rgba),
-        &ctx.storage_from("v_depth", &v_depth),
+        Some(&ctx.storage_from("v_depth", &v_depth)),
     );
     let gpu_grads = grads.params.read_grads(ctx, 0, g.len() as u32).unwrap();
     assert!(

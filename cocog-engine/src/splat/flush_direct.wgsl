@@ -17,6 +17,8 @@ fn flush(base: u32, contributes: bool, g0: vec4<f32>, g1: vec4<f32>, g2: vec2<f3
         add_nonzero(base + 6u, g1.z);
         add_nonzero(base + 7u, g1.w);
         add_nonzero(base + 8u, g2.x);
-        add_nonzero(base + 9u, g2.y);
+        if (DEPTH_GRAD) {
+            add_nonzero(base + 9u, g2.y);
+        }
     }
 }

@@ -13,7 +13,9 @@ fn flush(base: u32, contributes: bool, g0: vec4<f32>, g1: vec4<f32>, g2: vec2<f3
             add_grad(base + 6u, s1.z);
             add_grad(base + 7u, s1.w);
             add_grad(base + 8u, s2.x);
-            add_grad(base + 9u, s2.y);
+            if (DEPTH_GRAD) {
+                add_grad(base + 9u, s2.y);
+            }
         }
     }
 }

@@ -5,7 +5,9 @@
 // The host appends `add_grad` and the `v_proj` binding (slot 9) — native float atomics where
 // the adapter has them, a compare-exchange loop otherwise — and `flush`, which either adds
 // each pixel's gradient directly or first sums it over the subgroup (one atomic per
-// subgroup instead of one per pixel).
+// subgroup instead of one per pixel). The host also prepends `DEPTH_GRAD` and `depth_grad`:
+// the binding of `v_depth` (slot 8) where a loss needs depth, or a constant 0 that compiles the
+// depth channel out (no read, no compositing of depth, one atomic fewer per Gaussian).
 
 struct Params {
     width: u32,
@@ -22,7 +24,6 @@ struct Params {
 @group(0) @binding(5) var<storage, read> out_t: array<f32>;
 @group(0) @binding(6) var<storage, read> out_last: array<u32>;
 @group(0) @binding(7) var<storage, read> v_rgba: array<vec4<f32>>;
-@group(0) @binding(8) var<storage, read> v_depth: array<f32>;
 
 const BATCH: u32 = 256u;
 const ALPHA_MAX: f32 = 0.99;
@@ -61,7 +62,7 @@ fn rasterize_backward(
         t_final = out_t[pix];
         last = out_last[pix];
         v_out = v_rgba[pix];
-        v_d = v_depth[pix];
+        v_d = depth_grad(pix);
     }
     if (tid == 0u) {
         atomicStore(&tile_end, range.x);
@@ -114,11 +115,13 @@ fn rasterize_backward(
                 let c = batch_c[k].xyz;
                 var v_alpha = v_out.w * t_final / one_minus;
                 v_alpha += dot(v_out.xyz, t * c - behind / one_minus);
-                v_alpha += v_d * (t * a.z - behind_depth / one_minus);
+                if (DEPTH_GRAD) {
+                    v_alpha += v_d * (t * a.z - behind_depth / one_minus);
+                    behind_depth += a.z * w;
+                    g2.y = w * v_d;
+                }
                 behind += c * w;
-                behind_depth += a.z * w;
                 g1 = vec4<f32>(0.0, w * v_out.xyz);
-                g2.y = w * v_d;
                 if (raw <= ALPHA_MAX) {
                     let v_power = v_alpha * alpha;
                     g0 = -v_power * vec4<f32>(

@@ -3,7 +3,9 @@
 use super::batch::{Batch, ParamBuffers};
 use super::state::{ForwardState, Gradients};
 use crate::EngineError;
-use crate::core::{GpuContext, Kernel, Recorder, Workspace, shader};
+use std::sync::OnceLock;
+
+use crate::core::{Bind, GpuContext, Kernel, Recorder, Workspace, shader};
 use crate::prims::{PrefixSum, RadixSort, SortBuffers, SortCount};
 use crate::types::sh_coeffs_per_channel;
 
@@ -56,7 +58,10 @@ pub struct Renderer {
     tile_ranges: Kernel,
     check_capacity: Kernel,
     rasterize: Kernel,
-    rasterize_backward: Kernel,
+    /// The compositing backward's source and its two builds, made on first use: with the depth
+    /// channel (`[1]`) and without it (`[0]`).
+    rasterize_backward_src: String,
+    rasterize_backward: [OnceLock<Kernel>; 2],
     /// Overrides the device's binding limit (tests of the banded paths at small sizes).
     binding_limit: Option<u64>,
 }
@@ -111,11 +116,7 @@ impl Renderer {
         } else {
             include_str!("flush_direct.wgsl")
         };
-        let raster_bwd = shader(
-            ctx,
-            "rasterize_backward",
-            &format!("{raster_bwd_src}\n{atomics}\n{flush}"),
-        );
+        let rasterize_backward_src = format!("{raster_bwd_src}\n{atomics}\n{flush}");
         Self {
             scan: PrefixSum::new(ctx),
             sort: RadixSort::new(ctx),
@@ -126,7 +127,8 @@ impl Renderer {
             tile_ranges: Kernel::new(ctx, &tiles, "tile_ranges"),
             check_capacity: Kernel::new(ctx, &tiles, "check_capacity"),
             rasterize: Kernel::new(ctx, &raster, "rasterize"),
-            rasterize_backward: Kernel::new(ctx, &raster_bwd, "rasterize_backward"),
+            rasterize_backward_src,
+            rasterize_backward: Default::default(),
             binding_limit: None,
         }
     }
@@ -346,16 +348,38 @@ impl Renderer {
         state
     }
 
+    /// The compositing backward, with or without the depth channel.
+    fn rasterize_backward(&self, ctx: &GpuContext, depth: bool) -> &Kernel {
+        self.rasterize_backward[usize::from(depth)].get_or_init(|| {
+            let prelude = if depth {
+                "const DEPTH_GRAD: bool = true;\n\
+                 @group(0) @binding(8) var<storage, read> v_depth: array<f32>;\n\
+                 fn depth_grad(pix: u32) -> f32 { return v_depth[pix]; }"
+            } else {
+                "const DEPTH_GRAD: bool = false;\n\
+                 fn depth_grad(pix: u32) -> f32 { return 0.0; }"
+            };
+            let label = if depth {
+                "rasterize_backward"
+            } else {
+                "rasterize_backward (no depth)"
+            };
+            let src = format!("{prelude}\n{}", self.rasterize_backward_src);
+            Kernel::labelled(ctx, &shader(ctx, label, &src), "rasterize_backward", label)
+        })
+    }
+
     /// Gradients of a loss with respect to every parameter of `batch`, given the loss's
     /// gradients with respect to the forward outputs: `v_rgba` (rgb colour, alpha) and
-    /// `v_depth`, both laid out like `state.rgba`/`state.depth`. No GPU→CPU sync.
+    /// `v_depth`, both laid out like `state.rgba`/`state.depth`; `None` where the loss does
+    /// not look at depth, which compiles the depth channel out. No GPU→CPU sync.
     pub fn backward(
         &self,
         ctx: &GpuContext,
         batch: &Batch,
         state: &ForwardState,
         v_rgba: &wgpu::Buffer,
-        v_depth: &wgpu::Buffer,
+        v_depth: Option<&wgpu::Buffer>,
     ) -> Gradients {
         let mut rec = ctx.recorder();
         let grads = self.encode_backward(
@@ -378,7 +402,7 @@ impl Renderer {
         batch: &Batch,
         state: &ForwardState,
         v_rgba: &wgpu::Buffer,
-        v_depth: &wgpu::Buffer,
+        v_depth: Option<&wgpu::Buffer>,
     ) -> Gradients {
         let ctx = rec.ctx();
         let n = batch.params.num_gaussians;
@@ -387,20 +411,23 @@ impl Renderer {
         let grads = ParamBuffers::gradients_in(ctx, ws, &batch.params);
         let raster = rec.uniform(&Self::raster_params(batch));
         let globals = rec.uniform(&Self::globals(batch));
-        self.rasterize_backward.dispatch(
+        let mut binds: Vec<(u32, &dyn Bind)> = vec![
+            (0, &raster),
+            (1, &batch.backgrounds),
+            (2, &state.ranges),
+            (3, &state.tile_values),
+            (4, &state.projected),
+            (5, &state.final_t),
+            (6, &state.last),
+            (7, v_rgba),
+            (9, &v_proj),
+        ];
+        if let Some(v_depth) = v_depth {
+            binds.push((8, v_depth));
+        }
+        self.rasterize_backward(ctx, v_depth.is_some()).dispatch(
             rec,
-            &[
-                (0, &raster),
-                (1, &batch.backgrounds),
-                (2, &state.ranges),
-                (3, &state.tile_values),
-                (4, &state.projected),
-                (5, &state.final_t),
-                (6, &state.last),
-                (7, v_rgba),
-                (8, v_depth),
-                (9, &v_proj),
-            ],
+            &binds,
             [tiles_x, tiles_y, batch.num_images()],
         );
         let p = &batch.params;

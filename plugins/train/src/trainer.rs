@@ -216,8 +216,6 @@ pub struct Trainer<'c> {
     cameras: Vec<Camera>,
     /// Per view, rgba f32 laid out like `ForwardState::rgba` (alpha unused by the loss).
     targets: Vec<GpuBuffer>,
-    /// The loss has no depth term; the backward still wants a (zero) depth gradient.
-    v_depth: GpuBuffer,
     /// The parameters and the current view's camera. `None` only after a step failed between
     /// taking and returning it (see `Poisoned`).
     batch: Option<Batch>,
@@ -317,7 +315,6 @@ impl<'c> Trainer<'c> {
             widen_sh: sh_growth::widen_kernel(ctx),
             densify: crate::GpuDensify::new(ctx),
             targets,
-            v_depth: ctx.storage("v_depth", u64::from(w * h) * 4),
             moments: state.moments,
             stats: state.stats,
             rng: state.rng,
@@ -675,9 +672,9 @@ impl<'c> Trainer<'c> {
             .loss
             .compute(rec, ws, &state.rgba, target, w, h, 1, c.lambda_dssim);
         watch.times.forward += watch.lap_recorded(rec)?;
-        let grads =
-            self.renderer
-                .encode_backward(rec, ws, batch, &state, &out.v_pred, &self.v_depth);
+        let grads = self
+            .renderer
+            .encode_backward(rec, ws, batch, &state, &out.v_pred, None);
         watch.times.backward += watch.lap_recorded(rec)?;
         if plan.gather_stats {
             self.stats.accumulate(rec, &state, &grads, w, h);

@@ -47,8 +47,7 @@ fn gradient_statistics_match_a_cpu_model() {
             0.2,
         );
         rec.submit();
-        let v_depth = ctx.storage("v_depth", u64::from(W * H) * 4);
-        let grads = renderer.backward(ctx, &batch, &state, &out.v_pred, &v_depth);
+        let grads = renderer.backward(ctx, &batch, &state, &out.v_pred, None);
         let mut rec = ctx.recorder();
         stats.accumulate(&mut rec, &state, &grads, W, H);
         rec.submit();

@@ -85,10 +85,9 @@ impl<'c> Trainer<'c> {
             coc.compositor
                 .encode_backward(rec, ws, &coc.f_params, &state.rgba, &comp, &out.v_pred);
         watch.times.compositor += watch.lap_recorded(rec)?;
-        let v_depth = ws.zeroed(rec, "coc v depth", u64::from(sets * w * h) * 4);
-        let grads =
-            self.renderer
-                .encode_backward(rec, ws, sbatch, &state, &back.v_renders, &v_depth);
+        let grads = self
+            .renderer
+            .encode_backward(rec, ws, sbatch, &state, &back.v_renders, None);
         watch.times.backward += watch.lap_recorded(rec)?;
         let g = &grads.params;
         let cg = coc.kernels.encode_backward(
