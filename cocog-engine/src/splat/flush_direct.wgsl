@@ -6,6 +6,10 @@ fn add_nonzero(i: u32, v: f32) {
     }
 }
 
+fn walk_end(last: u32) -> u32 {
+    return last;
+}
+
 fn flush(base: u32, contributes: bool, g0: vec4<f32>, g1: vec4<f32>, g2: vec2<f32>, lane: u32) {
     if (contributes) {
         add_nonzero(base, g0.x);

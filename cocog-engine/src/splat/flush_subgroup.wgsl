@@ -1,3 +1,7 @@
+fn walk_end(last: u32) -> u32 {
+    return subgroupMax(last);
+}
+
 fn flush(base: u32, contributes: bool, g0: vec4<f32>, g1: vec4<f32>, g2: vec2<f32>, lane: u32) {
     if (subgroupAny(contributes)) {
         let s0 = subgroupAdd(g0);

@@ -5,7 +5,8 @@
 // The host appends `add_grad` and the `v_proj` binding (slot 9) — native float atomics where
 // the adapter has them, a compare-exchange loop otherwise — and `flush`, which either adds
 // each pixel's gradient directly or first sums it over the subgroup (one atomic per
-// subgroup instead of one per pixel). The host also prepends `DEPTH_GRAD` and `depth_grad`:
+// subgroup instead of one per pixel), and `walk_end`, where each invocation's walk starts: its
+// own last Gaussian, or its subgroup's (so the subgroup stays in step for the sums). The host also prepends `DEPTH_GRAD` and `depth_grad`:
 // the binding of `v_depth` (slot 8) where a loss needs depth, or a constant 0 that compiles the
 // depth channel out (no read, no compositing of depth, one atomic fewer per Gaussian).
 
@@ -75,6 +76,7 @@ fn rasterize_backward(
     }
     let end = workgroupUniformLoad(&tile_end_snapshot);
 
+    let my_end = walk_end(last);
     var t = t_final;
     var behind = t_final * backgrounds[image].xyz;
     var behind_depth = 0.0;
@@ -91,10 +93,12 @@ fn rasterize_backward(
             batch_c[tid] = projected[3u * g + 2u];
         }
         workgroupBarrier();
-        for (var j = batch_end - batch_start; j > 0u; j--) {
+        // Gaussians at or past `my_end` are behind every pixel this invocation (or its
+        // subgroup) composited: skip them.
+        for (var j = clamp(my_end, batch_start, batch_end) - batch_start; j > 0u; j--) {
             let k = j - 1u;
-            // Every thread walks the same Gaussians in lockstep (the bounds are uniform), so
-            // `flush` may reduce across the subgroup; non-contributing pixels add zeros.
+            // A subgroup walks the same Gaussians in lockstep (the bounds are uniform in it),
+            // so `flush` may reduce across it; non-contributing pixels add zeros.
             // v_proj slots 0-3, 4-7 and 8-9 (see the layout above).
             var g0 = vec4<f32>(0.0);
             var g1 = vec4<f32>(0.0);
