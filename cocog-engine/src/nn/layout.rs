@@ -23,6 +23,21 @@ impl CompositorConfig {
     pub fn layout(&self) -> CompositorLayout {
         CompositorLayout::new(self.channels as usize)
     }
+
+    /// Floating-point operations (a multiply-add counts 2) of F's convolutions over `images`
+    /// renders of `pixels` pixels: (forward, backward). The backward takes every layer's weight
+    /// gradient and the input gradients of the second layer and the head; F sees detached
+    /// renders, so the first layer has no input gradient. Norms, ReLUs and the softmax blend
+    /// are a few operations per value and are left out.
+    pub fn flops(&self, pixels: u64, images: u32) -> (f64, f64) {
+        let c = f64::from(self.channels);
+        let (first, second, head) = (25.0 * 3.0 * c, 9.0 * c * c, 9.0 * c);
+        let per_value = 2.0 * pixels as f64 * f64::from(images);
+        (
+            per_value * (first + second + head),
+            per_value * (first + 2.0 * second + 2.0 * head),
+        )
+    }
 }
 
 impl Default for CompositorConfig {
@@ -85,6 +100,16 @@ impl CompositorLayout {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn flops_count_every_multiply_add_of_the_convolutions() {
+        // One pixel of one render at 2 channels: conv1 150, conv2 36, head 18 multiply-adds.
+        let (f, b) = CompositorConfig::with_channels(2).flops(1, 1);
+        assert_eq!((f, b), (2.0 * 204.0, 2.0 * (150.0 + 72.0 + 36.0)));
+        // The paper's F over six 100×75 renders: 3.8 GFLOP forward.
+        let (f, _) = CompositorConfig::default().flops(7500, 6);
+        assert!((f - 3.80e9).abs() < 0.01e9, "{f}");
+    }
 
     #[test]
     fn the_layers_tile_the_buffer() {

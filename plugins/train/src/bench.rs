@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use cocog_engine::GpuContext;
+use cocog_engine::nn::CompositorConfig;
 use cocog_pipeline::{Context, Scene, Split, StageError};
 use serde::Serialize;
 
@@ -84,6 +85,11 @@ pub struct BenchReport {
     pub per_iteration: OpsPerIteration,
     /// With `kernels`: GPU time per kernel over the profiled iterations, largest first.
     pub kernels: Vec<KernelMs>,
+    /// CoCoGaussian only: floating-point operations of F's convolutions per iteration,
+    /// forward and backward (`CompositorConfig::flops`), and what the compositor phase's
+    /// time makes of them.
+    pub compositor_gflop: Option<f64>,
+    pub compositor_gflop_per_s: Option<f64>,
 }
 
 /// Mean engine operations per iteration: what issue #11's execution model drives to
@@ -354,14 +360,21 @@ fn measure(
             ms_per_iteration: k.ms / f64::from(n),
         })
         .collect();
+    let phases_ms = per_iteration(&phases, n);
+    let (width, height) = (views[0].camera.width, views[0].camera.height);
+    let compositor_gflop = opts.coc.as_ref().map(|c| {
+        let f = CompositorConfig::with_channels(c.compositor_channels);
+        let (fwd, bwd) = f.flops(u64::from(width) * u64::from(height), c.net.copies + 1);
+        (fwd + bwd) / 1e9
+    });
     Ok(BenchReport {
         adapter: gpu.adapter_name(),
         source,
         method: if opts.coc.is_some() { "cocog" } else { "3dgs" }.to_owned(),
         float_atomics: gpu.float_atomics,
         subgroups: gpu.subgroups,
-        width: views[0].camera.width,
-        height: views[0].camera.height,
+        width,
+        height,
         views: views.len(),
         start_iteration: start,
         gaussians_start,
@@ -369,7 +382,11 @@ fn measure(
         iterations: opts.iterations,
         it_per_s: f64::from(n) / seconds.max(1e-9),
         ms_per_iteration: 1e3 * seconds / f64::from(n),
-        phases_ms: per_iteration(&phases, n),
+        compositor_gflop_per_s: compositor_gflop
+            .filter(|_| phases_ms.compositor > 0.0)
+            .map(|g| g / (phases_ms.compositor / 1e3)),
+        compositor_gflop,
+        phases_ms,
         peak_gpu_bytes: gpu.memory.peak_bytes(),
         peak_host_bytes: peak_host_bytes(),
         per_iteration: OpsPerIteration::from(ops, n),
@@ -389,6 +406,13 @@ impl BenchReport {
     /// A few aligned lines for a terminal.
     pub fn table(&self) -> String {
         let mut out = self.summary();
+        if let (Some(g), Some(rate)) = (self.compositor_gflop, self.compositor_gflop_per_s) {
+            let share = 100.0 * self.phases_ms.compositor / self.phases_ms.total.max(1e-9);
+            out += &format!(
+                "compositor F     {share:.0}% of the profiled step; {g:.2} GFLOP/iteration in its \
+                 convolutions (forward + backward), {rate:.2} GFLOP/s over the compositor phase\n"
+            );
+        }
         if !self.kernels.is_empty() {
             out += "GPU time per kernel (ms/iteration, passes/iteration):\n";
             for k in &self.kernels {
