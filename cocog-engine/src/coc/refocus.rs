@@ -83,6 +83,14 @@ impl<'c> Refocus<'c> {
         })
     }
 
+    /// Plans for at most `bytes` per buffer binding instead of the device's limit (tests of
+    /// the size checks and of banded sharp renders at small sizes).
+    pub fn with_binding_limit(mut self, bytes: u64) -> Self {
+        self.renderer = std::mem::replace(&mut self.renderer, Renderer::new(self.ctx))
+            .with_binding_limit(bytes);
+        self
+    }
+
     /// The base Gaussians alone (what aperture 0 gives, and what test views are scored on), at
     /// any size: in bands of rows where the frame outgrows a buffer binding.
     pub fn render_sharp(
@@ -124,6 +132,9 @@ impl<'c> Refocus<'c> {
                 "aperture {} (must be 0 or more)",
                 lens.aperture
             )));
+        }
+        if lens.aperture > 0.0 {
+            self.check_size(camera, lens.composite)?;
         }
         let sharp = self.render_sharp(camera, background)?;
         if lens.aperture == 0.0 {
@@ -193,6 +204,40 @@ impl<'c> Refocus<'c> {
             alpha: rgba.iter().map(|p| p[3]).collect(),
             depth: sharp.depth,
         })
+    }
+
+    /// A refocused view renders M + 1 sets at once and, composited by F, holds its feature
+    /// maps (sets × channels floats a pixel): unlike the sharp render it cannot go in bands
+    /// (F's instance norm sees the whole image), so a view too large for one buffer binding
+    /// is refused with the size that fits.
+    fn check_size(&self, camera: &Camera, composite: CompositeMode) -> Result<(), EngineError> {
+        let (w, h) = (camera.width, camera.height);
+        let pixels = u64::from(w) * u64::from(h);
+        let sets = u64::from(self.kernels.config().copies + 1);
+        let channels = self.compositor.layout().channels as u64;
+        let rgba = 16 * pixels * sets;
+        let maps = 4 * pixels * sets * channels;
+        let (need, what, also) = if composite == CompositeMode::Learned && maps > rgba {
+            (
+                maps,
+                format!("the compositor's {channels}-channel maps of {sets} renders"),
+                ", or average the renders (--composite mean)",
+            )
+        } else {
+            (rgba, format!("{sets} rgba renders"), "")
+        };
+        let limit = self.renderer.binding_limit(self.ctx);
+        if need <= limit {
+            return Ok(());
+        }
+        let mib = |b: u64| b as f64 / f64::from(1 << 20);
+        Err(EngineError::Invalid(format!(
+            "a refocused {w}×{h} view needs a {:.0} MiB GPU buffer binding ({what}) and this \
+             adapter binds at most {:.0} MiB: render it smaller (--downscale {} or more){also}",
+            mib(need),
+            mib(limit),
+            (need as f64 / limit as f64).sqrt().ceil()
+        )))
     }
 
     fn take_base(&mut self) -> Result<ParamBuffers, EngineError> {
