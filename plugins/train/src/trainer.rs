@@ -244,6 +244,8 @@ pub struct Trainer<'c> {
     depth_axis: crate::DepthAxis,
     iteration: u32,
     profiling: bool,
+    /// Densify through the CPU rule even where the doubled set fits a binding.
+    cpu_densification: bool,
 }
 
 impl<'c> Trainer<'c> {
@@ -335,6 +337,7 @@ impl<'c> Trainer<'c> {
             scene_scale,
             iteration: state.iteration,
             profiling: false,
+            cpu_densification: false,
             config,
         };
         trainer.capacity = trainer.measure_capacity()?;
@@ -349,6 +352,12 @@ impl<'c> Trainer<'c> {
     /// phase, so only benchmarks turn it on.
     pub fn set_profiling(&mut self, on: bool) {
         self.profiling = on;
+    }
+
+    /// Densify through the CPU fallback (read back, `plan_densify`, upload) that sets too large
+    /// for a doubled buffer take, whatever their size: what its trainer-level test runs.
+    pub fn force_cpu_densification(&mut self, on: bool) {
+        self.cpu_densification = on;
     }
 
     pub fn config(&self) -> &TrainConfig {

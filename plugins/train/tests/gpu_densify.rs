@@ -370,3 +370,70 @@ fn gpu_densification_makes_the_cpu_rules_decisions() {
         assert!(buried.v_sh[12 * after..].iter().all(|&v| v == 0.0));
     }
 }
+
+/// The trainer's CPU fallback (sets whose doubled rows would not fit a binding: read back,
+/// `plan_densify`, upload, moments regathered) against the GPU path from the same start: the
+/// same rule on the same statistics, so the same counts up to the float atomics' summation
+/// order, and a run that fits as well.
+#[test]
+fn the_cpu_densification_fallback_trains_like_the_gpu_path() {
+    let Some(ctx) = gpu() else { return };
+    let mut rng = SplitMix64::new(8);
+    let s = scene(ctx, &mut rng);
+    let init = noisy_init(&s.truth, 2, &mut rng);
+    let config = TrainConfig {
+        iterations: 160,
+        max_sh_degree: 0,
+        seed: 4,
+        loss_every: 0,
+        densify: Some(DensifyConfig {
+            from_iter: 20,
+            until_iter: 150,
+            interval: 25,
+            opacity_reset_interval: 0,
+            // A quarter of INRIA's threshold: most of the sparse start clones or splits.
+            grad_threshold: 5e-5,
+            ..DensifyConfig::default()
+        }),
+        ..TrainConfig::default()
+    };
+    let run = |cpu: bool| {
+        let mut trainer = Trainer::new(ctx, &init, &s.train, config.clone()).unwrap();
+        trainer.force_cpu_densification(cpu);
+        let mut counts = Vec::new();
+        for it in 1..=160 {
+            trainer.step().unwrap();
+            if [40, 90, 160].contains(&it) {
+                counts.push(trainer.gaussians().unwrap().len());
+            }
+        }
+        let g = trainer.gaussians().unwrap();
+        g.validate().unwrap();
+        assert!(g.means.iter().flatten().all(|v| v.is_finite()));
+        (
+            counts,
+            mean_psnr(&mut trainer, &s.test_cams, &s.test_images),
+        )
+    };
+    let (gpu_counts, gpu_psnr) = run(false);
+    let (cpu_counts, cpu_psnr) = run(true);
+    eprintln!(
+        "counts at 40, 90, 160: GPU {gpu_counts:?}, CPU {cpu_counts:?}; held-out PSNR GPU \
+         {gpu_psnr:.2}, CPU {cpu_psnr:.2} dB"
+    );
+    assert!(cpu_counts[0] > init.len(), "the CPU path did not densify");
+    // The first densification decides on statistics that differ only in summation order.
+    let off = |a: usize, b: usize| (a as f64 - b as f64).abs() / b as f64;
+    assert!(
+        off(cpu_counts[0], gpu_counts[0]) < 0.02,
+        "{cpu_counts:?} vs {gpu_counts:?}"
+    );
+    assert!(
+        off(cpu_counts[2], gpu_counts[2]) < 0.10,
+        "{cpu_counts:?} vs {gpu_counts:?}"
+    );
+    assert!(
+        (cpu_psnr - gpu_psnr).abs() < 1.0,
+        "{cpu_psnr} vs {gpu_psnr}"
+    );
+}

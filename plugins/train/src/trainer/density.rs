@@ -43,7 +43,7 @@ impl<'c> Trainer<'c> {
     /// within a buffer binding. Otherwise `densify_on_cpu` does it.
     pub(super) fn densifies_on_gpu(&self, n: u32) -> bool {
         let limit = self.ctx.binding_limit();
-        fits(u64::from(2 * n), self.sh_stride(), limit)
+        !self.cpu_densification && fits(u64::from(2 * n), self.sh_stride(), limit)
     }
 
     /// Floats of SH per Gaussian.
