@@ -1,0 +1,101 @@
+#!/usr/bin/env bash
+# The issues' quality gates as one prepared run: for a session lent a GPU, whose device time is
+# short (run the sets that fit, one call), or on lavapipe in the background (hours).
+#
+#   bench/gates.sh OUT SET... [--scenes DIR] [--iterations N] [-- TRAIN_ARGS...]
+#
+# SETs, each run = ingest colmap -> train (test views scored every 500 iterations) -> cocog eval
+# of the sharp test views (+ cocog lens against the true focus for cocog runs):
+#   9-small    3dgs on sharp-dev and defocus-dev/dev-table, --downscale 4, 7000 iterations (#9)
+#   9-full     the same at full size, 30000 iterations (#9)
+#   12-small   3dgs and cocog on dev-table and dev-shelf, --downscale 4, 7000 iterations (#12)
+#   12-full    the same at full size, 30000 iterations (#12)
+# --iterations N overrides every run's length (a smoke test: the schedules stay as they are);
+# TRAIN_ARGS go to every `cocog train`. Scenes come from --scenes (default ../shared/bench,
+# which holds sharp-dev/ and defocus-dev/); cocog is $COCOG, else target/release/cocog.
+#
+# OUT/RUN/ keeps each trained scene (train-log.jsonl, scene.json with the learned focus
+# distances, metrics.json, lens.json); OUT/summary.tsv has one line per run: run, iterations,
+# train seconds, Gaussians, test PSNR, SSIM (Deblur-NeRF), SSIM (Gaussian-11), LPIPS-Alex (n/a
+# without its weights: scripts/lpips/fetch-weights.sh, or COCOG_LPIPS_WEIGHTS), the iteration of
+# the last training-PSNR drop, and the median relative focus error (cocog runs).
+#
+# On a lent GPU (../shared/notes/gpu-device.md carries the Vulkan loader): put the stripped
+# binary, the three scenes without their depth/ folders and the LPIPS weights under .device/,
+# then run, e.g., `COCOG=.device/cocog COCOG_LPIPS_WEIGHTS=.device/lpips bench/gates.sh /tmp/g
+# 9-small 12-small --scenes .device/bench && tar czf $OUT/gates.tgz -C /tmp g` (at most 8 files
+# come back from $OUT).
+set -euo pipefail
+
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+usage() { sed -n '2,27p' "${BASH_SOURCE[0]}" >&2; exit 2; }
+
+out="" sets=() scenes="$root/../shared/bench" iterations="" train_args=()
+while [[ $# -gt 0 ]]; do
+    case "$1" in
+        --scenes) scenes="${2:?--scenes needs a folder}"; shift 2 ;;
+        --iterations) iterations="${2:?--iterations needs a number}"; shift 2 ;;
+        --) shift; train_args=("$@"); break ;;
+        -h|--help) usage ;;
+        -*) echo "gates.sh: unknown option $1" >&2; usage ;;
+        *) if [[ -z "$out" ]]; then out="$1"; else sets+=("$1"); fi; shift ;;
+    esac
+done
+[[ -n "$out" && ${#sets[@]} -gt 0 ]] || usage
+cocog="${COCOG:-$root/target/release/cocog}"
+[[ -x "$cocog" ]] ||
+    { echo "gates.sh: no cocog at $cocog; build it: cargo build --release -p cocog-cli" >&2; exit 1; }
+for s in sharp-dev defocus-dev/dev-table defocus-dev/dev-shelf; do
+    [[ -d "$scenes/$s/sparse" ]] || { echo "gates.sh: $scenes/$s: no COLMAP model (sparse/)" >&2; exit 1; }
+done
+
+# RUN = scene method downscale iterations, e.g. "dev-table cocog 4 7000".
+runs=()
+for set in "${sets[@]}"; do
+    case "$set" in
+        9-small) runs+=("sharp-dev 3dgs 4 7000" "dev-table 3dgs 4 7000") ;;
+        9-full) runs+=("sharp-dev 3dgs 1 30000" "dev-table 3dgs 1 30000") ;;
+        12-small) for s in dev-table dev-shelf; do runs+=("$s 3dgs 4 7000" "$s cocog 4 7000"); done ;;
+        12-full) for s in dev-table dev-shelf; do runs+=("$s 3dgs 1 30000" "$s cocog 1 30000"); done ;;
+        *) echo "gates.sh: unknown set $set" >&2; usage ;;
+    esac
+done
+
+mkdir -p "$out"
+summary="$out/summary.tsv"
+[[ -f "$summary" ]] || printf 'run\titerations\ttrain_s\tgaussians\tpsnr\tssim_dn\tssim_g11\tlpips\tlast_drop\tfocus_err\n' >"$summary"
+echo "gates: ${#runs[@]} runs with $("$cocog" --version 2>/dev/null || echo cocog) into $out" >&2
+
+for run in "${runs[@]}"; do
+    read -r scene method down its <<<"$run"
+    its="${iterations:-$its}"
+    case "$scene" in sharp-dev) src="$scenes/sharp-dev" ;; *) src="$scenes/defocus-dev/$scene" ;; esac
+    name="$scene-$method-d$down-$its"
+    ingested="$out/.ingest-$scene"
+    [[ -f "$ingested/scene.json" ]] || "$cocog" ingest colmap "$src" -o "$ingested" -q --force >&2
+    echo "gates: $name" >&2
+    "$cocog" train "$ingested" -o "$out/$name" --force -q --method "$method" --downscale "$down" \
+        --iterations "$its" --eval-every 500 ${train_args[@]+"${train_args[@]}"} >&2
+    "$cocog" eval "$out/$name" --downscale "$down" -q >/dev/null
+    if [[ "$method" == cocog ]]; then
+        "$cocog" lens "$out/$name" --truth "$src/transforms.json" --json >"$out/$name/lens.json"
+    fi
+    python3 - "$out/$name" "$name" "$its" >>"$summary" <<'EOF'
+import json, pathlib, sys
+d, name, its = pathlib.Path(sys.argv[1]), sys.argv[2], sys.argv[3]
+m = json.load(open(d / "metrics.json"))["mean"]
+log = [json.loads(l) for l in open(d / "train-log.jsonl") if l.strip()]
+s = next(r["summary"] for r in reversed(log) if "summary" in r)
+gaussians = json.load(open(d / "metrics.json")).get("gaussians", "?")
+f = lambda v, p: "n/a" if v is None else f"{v:.{p}f}"
+focus = "-"
+if (d / "lens.json").exists():
+    err = json.load(open(d / "lens.json")).get("median_focus_relative_error")
+    focus = "n/a" if err is None else f"{100 * abs(err):.1f}%"
+print("\t".join([name, its, f(s.get("seconds"), 1), str(gaussians), f(m.get("psnr"), 2),
+                 f(m.get("ssim_deblurnerf"), 4), f(m.get("ssim_gaussian11"), 4),
+                 f(m.get("lpips_alex"), 4), str(s.get("last_psnr_drop") or "-"), focus]))
+EOF
+    tail -1 "$summary" >&2
+done
+column -t -s $'\t' "$summary" >&2 || cat "$summary" >&2
