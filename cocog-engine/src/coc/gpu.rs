@@ -4,8 +4,8 @@
 
 use super::layout::{CAMERA_FREQS, CocConfig, CocVariant, INPUT_DIM, MEAN_FREQS};
 use super::mlp::{MlpActivations, MlpKernels};
+use crate::ParamBuffers;
 use crate::core::{GpuBuffer, GpuContext, Kernel, Recorder, Workspace, shader};
-use crate::{ParamBuffers, sh_coeffs_per_channel};
 
 /// What changes per step: the view and its camera centre.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -272,36 +272,19 @@ impl CocKernels {
     }
 
     /// The M + 1 sets as renderable parameters: the expansion's means, scales and rotations,
-    /// and each set's copy of its bases' opacities and SH (the rasterizer reads one of each
-    /// per Gaussian).
-    pub fn encode_sets(
-        &self,
-        rec: &mut Recorder,
-        ws: &mut Workspace,
-        base: &ParamBuffers,
-        exp: &CocExpansion,
-    ) -> ParamBuffers {
-        let ctx = rec.ctx();
-        let n = u64::from(base.num_gaussians);
-        let sets = u64::from(self.config.copies + 1);
-        let stride = 3 * sh_coeffs_per_channel(base.sh_degree) as u64;
-        let opacity = ws.buffer(ctx, "coc set opacities", sets * n * 4);
-        let sh = ws.buffer(ctx, "coc set sh", sets * n * stride * 4);
-        let (o, s) = (n * 4, n * stride * 4);
-        for m in 0..sets {
-            rec.encoder()
-                .copy_buffer_to_buffer(&base.opacity_logits, 0, &opacity, m * o, o);
-            rec.encoder()
-                .copy_buffer_to_buffer(&base.sh, 0, &sh, m * s, s);
-        }
+    /// and the bases' own opacity and SH buffers, which every set reads through its base's
+    /// row (`ParamBuffers::shared_rows`) instead of holding a copy. Records nothing.
+    pub fn sets(&self, base: &ParamBuffers, exp: &CocExpansion) -> ParamBuffers {
+        let sets = self.config.copies + 1;
         ParamBuffers {
             means: exp.means.clone(),
             log_scales: exp.log_scales.clone(),
             quats: exp.quats.clone(),
-            opacity_logits: opacity,
-            sh,
+            opacity_logits: base.opacity_logits.clone(),
+            sh: base.sh.clone(),
             sh_degree: base.sh_degree,
-            num_gaussians: (sets * n) as u32,
+            num_gaussians: sets * base.num_gaussians,
+            shared_rows: base.num_gaussians,
         }
     }
 

@@ -166,9 +166,7 @@ impl<'c> Refocus<'c> {
             n,
             &step,
         );
-        let sets = self
-            .kernels
-            .encode_sets(&mut rec, &mut self.ws, &base, &exp);
+        let sets = self.kernels.sets(&base, &exp);
         rec.submit();
         self.base = Some(base);
         let count = self.kernels.config().copies + 1;

@@ -29,6 +29,11 @@ pub struct ParamBuffers {
     pub sh: GpuBuffer,
     pub sh_degree: u32,
     pub num_gaussians: u32,
+    /// 0: every buffer has `num_gaussians` rows. k > 0: `opacity_logits` and `sh` have k
+    /// rows and Gaussian g reads row g mod k, so sets of k Gaussians (CoCoGaussian's copies,
+    /// method.md §3.5) share them instead of holding copies. Gradients keep one row per
+    /// Gaussian.
+    pub shared_rows: u32,
 }
 
 impl ParamBuffers {
@@ -62,6 +67,7 @@ impl ParamBuffers {
             sh: ctx.storage_from("sh", &all.sh),
             sh_degree,
             num_gaussians,
+            shared_rows: 0,
         })
     }
 
@@ -77,6 +83,7 @@ impl ParamBuffers {
             sh: ctx.storage("v_sh", sh_floats * 4),
             sh_degree: like.sh_degree,
             num_gaussians: like.num_gaussians,
+            shared_rows: 0,
         }
     }
 
@@ -93,6 +100,7 @@ impl ParamBuffers {
             sh: ws.buffer(ctx, "v_sh", sh_floats * 4),
             sh_degree: like.sh_degree,
             num_gaussians: like.num_gaussians,
+            shared_rows: 0,
         }
     }
 
@@ -195,6 +203,13 @@ fn image_infos(params: &ParamBuffers, images: &[ImageSpec]) -> Result<Vec<ImageI
     if w == 0 || h == 0 || w > 65_535 * 16 || h > 65_535 * 16 {
         return Err(EngineError::Invalid(format!(
             "unsupported image size {w}×{h}"
+        )));
+    }
+    let shared = params.shared_rows;
+    if shared > 0 && !params.num_gaussians.is_multiple_of(shared) {
+        return Err(EngineError::Invalid(format!(
+            "{} Gaussians cannot share opacity and SH rows in sets of {shared}",
+            params.num_gaussians
         )));
     }
     let mut infos = Vec::with_capacity(images.len());

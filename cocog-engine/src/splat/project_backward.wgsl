@@ -1,7 +1,8 @@
 // Projection backward: one thread per Gaussian chains the screen-space gradients (v_proj)
 // through EWA splatting, the quaternion normalisation, the scale activation, the sigmoid and
 // the SH evaluation (including its view-direction dependence on the mean). Each Gaussian
-// belongs to one image, so plain writes suffice.
+// belongs to one image, so plain writes suffice; Gaussians sharing opacity and SH rows
+// (`shared_row`) get a gradient row each, which the caller sums.
 
 @group(0) @binding(7) var<storage, read> v_proj: array<f32>;
 @group(0) @binding(8) var<storage, read_write> v_means: array<f32>;
@@ -130,12 +131,13 @@ fn project_backward(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_
     let basis = sh_basis(f.dir, n);
     let v_pre = select(vec3<f32>(0.0), v_color, f.color_pre > vec3<f32>(0.0));
     let base = g * 3u * n;
+    let row = shared_row(g) * 3u * n;
     var v_dir = vec3<f32>(0.0);
     for (var k = 0u; k < n; k++) {
         v_sh[base + k] = v_pre.x * basis[k];
         v_sh[base + n + k] = v_pre.y * basis[k];
         v_sh[base + 2u * n + k] = v_pre.z * basis[k];
-        let coeff = vec3<f32>(sh[base + k], sh[base + n + k], sh[base + 2u * n + k]);
+        let coeff = vec3<f32>(sh[row + k], sh[row + n + k], sh[row + 2u * n + k]);
         v_dir += dot(v_pre, coeff) * sh_basis_grad(f.dir, k);
     }
     v_p += (v_dir - f.dir * dot(f.dir, v_dir)) / f.dist;

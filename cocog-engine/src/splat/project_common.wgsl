@@ -9,7 +9,8 @@ struct Globals {
     tiles_x: u32,
     tiles_y: u32,
     sh_coeffs: u32,
-    pad: u32,
+    // 0, or the rows of opacity and SH that Gaussian g shares as row g mod shared_rows.
+    shared_rows: u32,
 }
 
 struct ImageInfo {
@@ -51,6 +52,13 @@ fn finite(x: f32) -> bool {
 
 fn finite3(v: vec3<f32>) -> bool {
     return finite(v.x) && finite(v.y) && finite(v.z);
+}
+
+fn shared_row(g: u32) -> u32 {
+    if (globals.shared_rows == 0u) {
+        return g;
+    }
+    return g % globals.shared_rows;
 }
 
 fn image_of(g: u32) -> u32 {
@@ -186,13 +194,13 @@ fn project_forward(g: u32) -> Fwd {
     f.dir = dv / f.dist;
     let n = globals.sh_coeffs;
     let basis = sh_basis(f.dir, n);
-    let base = g * 3u * n;
+    let base = shared_row(g) * 3u * n;
     var color = vec3<f32>(0.5);
     for (var k = 0u; k < n; k++) {
         color += basis[k] * vec3<f32>(sh[base + k], sh[base + n + k], sh[base + 2u * n + k]);
     }
     f.color_pre = color;
-    f.opacity = 1.0 / (1.0 + exp(-opacity_logits[g]));
+    f.opacity = 1.0 / (1.0 + exp(-opacity_logits[shared_row(g)]));
     f.valid = finite3(f.conic) && finite(f.mean2d.x) && finite(f.mean2d.y) && finite3(color) && finite(f.opacity)
         && finite(f.radius) && finite(f.dist) && f.dist > 0.0;
     return f;

@@ -23,7 +23,7 @@ struct Globals {
     tiles_x: u32,
     tiles_y: u32,
     sh_coeffs: u32,
-    pad: u32,
+    shared_rows: u32,
 }
 
 #[repr(C)]
@@ -160,7 +160,7 @@ impl Renderer {
             tiles_x,
             tiles_y,
             sh_coeffs: sh_coeffs_per_channel(batch.params.sh_degree) as u32,
-            pad: 0,
+            shared_rows: batch.params.shared_rows,
         }
     }
 

@@ -55,7 +55,7 @@ impl<'c> Trainer<'c> {
             &step,
         );
         watch.times.coc_net += watch.lap_recorded(rec)?;
-        let set_params = coc.kernels.encode_sets(rec, ws, base, &exp);
+        let set_params = coc.kernels.sets(base, &exp);
         let sbatch = CocState::aim(&mut coc.batch, ctx, set_params, sets, camera, background)?;
         let state = self.renderer.encode_forward(rec, ws, sbatch, self.capacity);
         watch.times.forward += watch.lap_recorded(rec)?;
