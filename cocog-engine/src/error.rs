@@ -14,8 +14,9 @@ pub enum EngineError {
     #[error("GPU readback failed: {0}")]
     Readback(String),
     #[error(
-        "one image needs {needed} tile intersections and a buffer binding holds {most}: render \
-         it in bands of rows (`Renderer::render_frame`) or with fewer, smaller Gaussians"
+        "the images of a forward pass need {needed} tile intersections and a buffer binding \
+         holds {most}: render smaller images (or bands of rows, `Renderer::render_frame`) or \
+         fewer, smaller Gaussians"
     )]
     TooManyIntersections { needed: u32, most: u32 },
     #[error("invalid input: {0}")]

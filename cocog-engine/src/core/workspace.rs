@@ -23,9 +23,12 @@ impl Workspace {
         match self.buffers.get(name) {
             Some(b) if b.size() >= bytes => b.clone(),
             existing => {
-                // A first request is sized exactly: many callers use one size forever.
+                // A first request is sized exactly: many callers use one size forever. The
+                // headroom never takes a buffer that fits one binding past the binding limit
+                // (a retried forward would otherwise fail in wgpu for what it planned to fit).
                 let size = if existing.is_some() {
-                    ((bytes as f64 * HEADROOM) as u64).next_multiple_of(4)
+                    let grown = ((bytes as f64 * HEADROOM) as u64).next_multiple_of(4);
+                    grown.min(ctx.binding_limit().max(bytes))
                 } else {
                     bytes
                 };

@@ -111,6 +111,11 @@ impl ParamBuffers {
         first: u32,
         count: u32,
     ) -> Result<GaussianGrads, EngineError> {
+        if self.shared_rows != 0 {
+            return Err(EngineError::Invalid(
+                "read_grads reads one row per Gaussian; these buffers share rows".into(),
+            ));
+        }
         let total = self.num_gaussians as usize;
         let (a, b) = (first as usize, (first + count) as usize);
         if b > total {

@@ -46,12 +46,13 @@ impl Renderer {
             .rev()
             .map(|b| (b * most, most.min(h - b * most)))
             .collect();
+        let pixels = w as usize * h as usize;
         let mut image = RenderedImage {
             width: w,
             height: h,
-            color: Vec::with_capacity((w * h) as usize),
-            alpha: Vec::with_capacity((w * h) as usize),
-            depth: Vec::with_capacity((w * h) as usize),
+            color: Vec::with_capacity(pixels),
+            alpha: Vec::with_capacity(pixels),
+            depth: Vec::with_capacity(pixels),
         };
         let mut bands = 0;
         while let Some((first_row, rows)) = todo.pop() {

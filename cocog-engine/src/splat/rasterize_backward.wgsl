@@ -1,6 +1,6 @@
 // Compositing backward: one 16×16 workgroup per (tile, image) replays the tile's list back
-// to front from the last Gaussian any of its pixels used, recovering each transmittance by
-// division, and accumulates per-Gaussian screen-space gradients with atomics.
+// to front, each subgroup (or pixel) from the last Gaussian it used, recovering each
+// transmittance by division, and accumulates per-Gaussian screen-space gradients with atomics.
 // v_proj layout per Gaussian: mean2d (2), conic (3), colour (3), opacity, depth.
 // The host appends `add_grad` and the `v_proj` binding (slot 9) — native float atomics where
 // the adapter has them, a compare-exchange loop otherwise — and `flush`, which either adds

@@ -281,7 +281,7 @@ impl CocState {
     }
 
     /// Points the (M + 1)-image batch in `slot` at `params` (means, scales, rotations of every
-    /// set; opacities and SH already repeated per set), all rendered from `camera`. A function
+    /// set; opacities and SH read from the base's rows), all rendered from `camera`. A function
     /// of the slot alone, so the batch can be borrowed beside the rest of the state.
     pub fn aim<'b>(
         slot: &'b mut Option<Batch>,
