@@ -212,9 +212,9 @@ impl<'c> Refocus<'c> {
         let (w, h) = (camera.width, camera.height);
         let pixels = u64::from(w) * u64::from(h);
         let sets = u64::from(self.kernels.config().copies + 1);
-        let channels = self.compositor.layout().channels as u64;
+        let channels = self.compositor.layout().channels;
         let rgba = 16 * pixels * sets;
-        let maps = 4 * pixels * sets * channels;
+        let maps = CompositorConfig::with_channels(channels as u32).map_bytes(pixels, sets as u32);
         let (need, what, also) = if composite == CompositeMode::Learned && maps > rgba {
             (
                 maps,

@@ -164,7 +164,7 @@ impl Compositor {
         let ctx = rec.ctx();
         let pixels = u64::from(w * h);
         let c = self.config.channels;
-        let maps = pixels * u64::from(images * c) * 4;
+        let maps = self.config.map_bytes(pixels, images);
         let blend = ws.buffer(ctx, "composite blend", pixels * 16);
         let weights = ws.buffer(ctx, "composite weights", pixels * u64::from(images) * 4);
         let logits = ws.buffer(ctx, "composite logits", pixels * u64::from(images) * 4);
@@ -308,7 +308,7 @@ impl Compositor {
             (w * h).div_ceil(256),
         );
         if let Some([l1, l2]) = &out.layers {
-            let maps = pixels * u64::from(images * c) * 4;
+            let maps = self.config.map_bytes(pixels, images);
             let v_y = ws.buffer(ctx, "compositor v y", maps);
             let v_z = ws.buffer(ctx, "compositor v z", maps);
             let grad_stats = ws.buffer(ctx, "compositor grad stats", u64::from(images * c) * 8);

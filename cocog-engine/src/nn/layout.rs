@@ -24,6 +24,12 @@ impl CompositorConfig {
         CompositorLayout::new(self.channels as usize)
     }
 
+    /// Bytes of one of F's feature maps over `images` renders of `pixels` pixels (channels
+    /// floats per pixel and render): its largest buffer, which must fit one binding.
+    pub fn map_bytes(&self, pixels: u64, images: u32) -> u64 {
+        4 * pixels * u64::from(images) * u64::from(self.channels)
+    }
+
     /// Floating-point operations (a multiply-add counts 2) of F's convolutions over `images`
     /// renders of `pixels` pixels: (forward, backward). The backward takes every layer's weight
     /// gradient and the input gradients of the second layer and the head; F sees detached

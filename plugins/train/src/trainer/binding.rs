@@ -3,6 +3,8 @@
 //! in a wgpu panic at the first step (or at the compositor's start, thousands of steps in).
 //! The loss works in bands of rows and needs no check.
 
+use cocog_engine::nn::CompositorConfig;
+
 use crate::TrainConfig;
 
 /// The largest per-pixel buffer of a run on `w`×`h` photos, in bytes, and what it holds.
@@ -33,7 +35,7 @@ pub(super) fn largest_binding(w: u32, h: u32, config: &TrainConfig) -> Need {
     }
     let channels = coc.compositor_channels;
     let maps = Need {
-        bytes: 4 * pixels * u64::from(sets) * u64::from(channels),
+        bytes: CompositorConfig::with_channels(channels).map_bytes(pixels, sets),
         what: format!(
             "a feature map of the compositor F, {channels} channels for each of {sets} renders, \
              from iteration {}",
