@@ -2,7 +2,8 @@
 # The issues' quality gates as one prepared run: for a session lent a GPU, whose device time is
 # short (run the sets that fit, one call), or on lavapipe in the background (hours).
 #
-#   bench/gates.sh OUT SET... [--scenes DIR] [--iterations N] [-- TRAIN_ARGS...]
+#   bench/gates.sh OUT SET... [--scenes DIR] [--iterations N] [--jobs J] [--deadline S]
+#                  [-- TRAIN_ARGS...]
 #
 # SETs, each run = ingest colmap -> train (test views scored every 500 iterations) -> cocog eval
 # of the sharp test views (+ cocog lens against the true focus for cocog runs):
@@ -10,11 +11,19 @@
 #   9-full     the same at full size, 30000 iterations (#9)
 #   12-small   3dgs and cocog on dev-table and dev-shelf, --downscale 4, 7000 iterations (#12)
 #   12-full    the same at full size, 30000 iterations (#12)
+#   12-variants cocog's paper and code variants (--coc-variant) on both dev scenes, --downscale 4,
+#              7000 iterations (#12 asks for both; 12-small trains the default)
 # On lavapipe (128 MiB bindings) 12-full's cocog runs are refused once F starts: F's maps at
 # 400×300 need 176 MiB; a failed run gets a `failed` row and the others go on.
 # --iterations N overrides every run's length (a smoke test: the schedules stay as they are);
-# TRAIN_ARGS go to every `cocog train`. Scenes come from --scenes (default ../shared/bench,
-# which holds sharp-dev/ and defocus-dev/); cocog is $COCOG, else target/release/cocog.
+# TRAIN_ARGS go to every `cocog train`. --jobs J trains J runs at once (a GPU that small images
+# leave idle between dispatches; their train seconds then time a shared GPU, not a speed figure).
+# --deadline S interrupts the trainings still running S seconds after the start (each keeps
+# OUT/RUN.checkpoint and its log with the test-view scores, OUT/RUN.train-log.jsonl) and records them as
+# `stopped` with the last scored iteration, so one bounded call still reports every run; the
+# same command again continues the stopped runs from their checkpoints and skips finished ones. Scenes
+# come from --scenes (default ../shared/bench, which holds sharp-dev/ and defocus-dev/); cocog is
+# $COCOG, else target/release/cocog. Each run's own output goes to OUT/RUN.log.
 #
 # OUT/RUN/ keeps each trained scene (train-log.jsonl, scene.json with the learned focus
 # distances, metrics.json, lens.json); OUT/summary.tsv has one line per run: run, iterations,
@@ -30,11 +39,13 @@
 set -euo pipefail
 
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-usage() { sed -n '2,29p' "${BASH_SOURCE[0]}" >&2; exit 2; }
+usage() { sed -n '2,37p' "${BASH_SOURCE[0]}" >&2; exit 2; }
 
-out="" sets=() scenes="$root/../shared/bench" iterations="" train_args=()
+out="" sets=() scenes="$root/../shared/bench" iterations="" train_args=() jobs=1 deadline=""
 while [[ $# -gt 0 ]]; do
     case "$1" in
+        --jobs) jobs="${2:?--jobs needs a number}"; shift 2 ;;
+        --deadline) deadline="${2:?--deadline needs seconds}"; shift 2 ;;
         --scenes) scenes="${2:?--scenes needs a folder}"; shift 2 ;;
         --iterations) iterations="${2:?--iterations needs a number}"; shift 2 ;;
         --) shift; train_args=("$@"); break ;;
@@ -51,7 +62,7 @@ for s in sharp-dev defocus-dev/dev-table defocus-dev/dev-shelf; do
     [[ -d "$scenes/$s/sparse" ]] || { echo "gates.sh: $scenes/$s: no COLMAP model (sparse/)" >&2; exit 1; }
 done
 
-# RUN = scene method downscale iterations, e.g. "dev-table cocog 4 7000".
+# RUN = scene method downscale iterations [coc variant], e.g. "dev-table cocog 4 7000 paper".
 runs=()
 for set in "${sets[@]}"; do
     case "$set" in
@@ -59,6 +70,8 @@ for set in "${sets[@]}"; do
         9-full) runs+=("sharp-dev 3dgs 1 30000" "dev-table 3dgs 1 30000") ;;
         12-small) for s in dev-table dev-shelf; do runs+=("$s 3dgs 4 7000" "$s cocog 4 7000"); done ;;
         12-full) for s in dev-table dev-shelf; do runs+=("$s 3dgs 1 30000" "$s cocog 1 30000"); done ;;
+        12-variants) for s in dev-table dev-shelf; do
+            runs+=("$s cocog 4 7000 paper" "$s cocog 4 7000 code"); done ;;
         *) echo "gates.sh: unknown set $set" >&2; usage ;;
     esac
 done
@@ -71,48 +84,56 @@ summary="$out/summary.tsv"
 [[ -f "$summary" ]] || printf 'run\titerations\ttrain_s\tgaussians\tpsnr\tssim_dn\tssim_g11\tlpips\tlast_drop\tfocus_err\n' >"$summary"
 echo "gates: ${#runs[@]} runs with $("$cocog" --version 2>/dev/null || echo cocog) into $out" >&2
 
+# Ingest each scene once, before runs start in parallel.
 for run in "${runs[@]}"; do
-    read -r scene method down its <<<"$run"
+    read -r scene _ <<<"$run"
+    case "$scene" in sharp-dev) src="$scenes/sharp-dev" ;; *) src="$scenes/defocus-dev/$scene" ;; esac
+    [[ -f "$out/.ingest-$scene/scene.json" ]] ||
+        "$cocog" ingest colmap "$src" -o "$out/.ingest-$scene" -q --force >&2
+done
+t0=$SECONDS
+
+one_run() {
+    local scene method down its variant src name rc=0 limit=()
+    read -r scene method down its variant <<<"$1"
     its="${iterations:-$its}"
     case "$scene" in sharp-dev) src="$scenes/sharp-dev" ;; *) src="$scenes/defocus-dev/$scene" ;; esac
-    name="$scene-$method-d$down-$its"
-    ingested="$out/.ingest-$scene"
-    [[ -f "$ingested/scene.json" ]] || "$cocog" ingest colmap "$src" -o "$ingested" -q --force >&2
-    echo "gates: $name" >&2
+    name="$scene-$method${variant:+-$variant}-d$down-$its"
+    if [[ -n "$deadline" ]]; then
+        local left=$((deadline - (SECONDS - t0)))
+        ((left > 0)) || { printf '%s\t%s\tnot started\n' "$name" "$its" | tee -a "$summary" >&2; return; }
+        limit=(timeout --signal=INT --kill-after=60 "$left")
+    fi
+    # Run again into the same OUT, a finished run is kept and a stopped one continues.
+    [[ -f "$out/$name/metrics.json" ]] && return
+    local resume=()
+    [[ -d "$out/$name.checkpoint" ]] && resume=(--resume "$out/$name.checkpoint")
+    echo "gates: $name${resume[@]+ (continued)}" >&2
     # A run that fails (e.g. refused as too large for this adapter) gets a row and the rest go on.
-    if ! "$cocog" train "$ingested" -o "$out/$name" --force -q --method "$method" \
-        --downscale "$down" --iterations "$its" --eval-every 500 \
-        ${train_args[@]+"${train_args[@]}"} >&2 ||
-        ! "$cocog" eval "$out/$name" --downscale "$down" -q >/dev/null; then
-        printf '%s\t%s\tfailed\n' "$name" "$its" | tee -a "$summary" >&2
-        continue
+    ${limit[@]+"${limit[@]}"} "$cocog" train "$out/.ingest-$scene" -o "$out/$name" --force -q \
+        --method "$method" ${variant:+--coc-variant "$variant"} --downscale "$down" \
+        --iterations "$its" --eval-every 500 ${resume[@]+"${resume[@]}"} \
+        ${train_args[@]+"${train_args[@]}"} \
+        >"$out/$name.log" 2>&1 || rc=$?
+    if ((rc == 124)) && [[ -f "$out/$name.train-log.jsonl" ]]; then
+        python3 "$root/bench/gates_row.py" "$out/$name.train-log.jsonl" "$name" "$its" stopped \
+            >>"$summary"
+    elif ((rc != 0)) ||
+        ! "$cocog" eval "$out/$name" --downscale "$down" -q >/dev/null 2>>"$out/$name.log"; then
+        printf '%s\t%s\tfailed\n' "$name" "$its" >>"$summary"
+    else
+        if [[ "$method" == cocog ]]; then
+            "$cocog" lens "$out/$name" --truth "$src/transforms.json" --json >"$out/$name/lens.json" ||
+                rm -f "$out/$name/lens.json"
+        fi
+        python3 "$root/bench/gates_row.py" "$out/$name" "$name" "$its" >>"$summary"
     fi
-    if [[ "$method" == cocog ]]; then
-        "$cocog" lens "$out/$name" --truth "$src/transforms.json" --json >"$out/$name/lens.json" ||
-            rm -f "$out/$name/lens.json"
-    fi
-    python3 - "$out/$name" "$name" "$its" >>"$summary" <<'EOF'
-import json, pathlib, sys
-d, name, its = pathlib.Path(sys.argv[1]), sys.argv[2], sys.argv[3]
-m = json.load(open(d / "metrics.json"))["mean"]
-log = [json.loads(l) for l in open(d / "train-log.jsonl") if l.strip()]
-s = next(r["summary"] for r in reversed(log) if "summary" in r)
-gaussians = "?"
-with open(d / "gaussians.ply", "rb") as ply:
-    for line in ply:
-        if line.startswith(b"element vertex "):
-            gaussians = line.split()[2].decode()
-        if line.strip() == b"end_header":
-            break
-f = lambda v, p: "n/a" if v is None else f"{v:.{p}f}"
-focus = "-"
-if (d / "lens.json").exists():
-    err = json.load(open(d / "lens.json")).get("median_focus_relative_error")
-    focus = "n/a" if err is None else f"{100 * abs(err):.1f}%"
-print("\t".join([name, its, f(s.get("seconds"), 1), str(gaussians), f(m.get("psnr"), 2),
-                 f(m.get("ssim_deblurnerf"), 4), f(m.get("ssim_gaussian11"), 4),
-                 f(m.get("lpips_alex"), 4), str(s.get("last_psnr_drop") or "-"), focus]))
-EOF
-    tail -1 "$summary" >&2
+    grep -F "$name	" "$summary" | tail -1 >&2
+}
+
+for run in "${runs[@]}"; do
+    while (($(jobs -rp | wc -l) >= jobs)); do wait -n || true; done
+    one_run "$run" &
 done
+wait
 column -t -s $'\t' "$summary" >&2 || cat "$summary" >&2
