@@ -264,9 +264,9 @@ pub struct PruneArgs {
 #[derive(Clone, Copy, ValueEnum)]
 pub enum Method {
     /// CoCoGaussian: circle-of-confusion Gaussians, for photos with depth-of-field blur.
-    /// Experimental: trains end to end, learns per-photo focus distances and writes a lens
-    /// model that `cocog render --focus-distance` refocuses with; its margin over 3dgs is
-    /// measured in BENCHMARKS.md and is not yet the paper's.
+    /// Learns per-photo focus distances and writes a lens model that `cocog render
+    /// --focus-distance` refocuses with; on the blurred dev scenes its sharp base beats 3dgs
+    /// by about 5 dB at 100×75 (BENCHMARKS.md), at about 2.8× the cost of a step.
     Cocog,
     /// Plain 3D Gaussian Splatting, for sharp photos.
     #[value(name = "3dgs")]
@@ -284,8 +284,7 @@ stays beside OUTPUT.checkpoint and --resume continues both."
 pub struct TrainArgs {
     #[command(flatten)]
     pub io: SceneToScene,
-    /// Training method. Default 3dgs (cocog becomes the default once it beats 3dgs on blurred
-    /// photos).
+    /// Training method. Default cocog (on sharp photos 3dgs gives the same scene for less).
     #[arg(long, value_enum)]
     pub method: Option<Method>,
     /// Training iterations, one view each. Default 7000 (3DGS's and the paper's long runs
@@ -295,13 +294,14 @@ pub struct TrainArgs {
     /// cocog: CoC Gaussians per base Gaussian, M. Default: the variant's (code 4, paper 5).
     #[arg(long = "coc-gaussians")]
     pub coc_gaussians: Option<u64>,
-    /// cocog: `lens` (a thin lens per photo: the CoC radius follows that photo's learned
-    /// aperture and focus distance, h_θ shapes the copies inside it; copies centred on their
-    /// base, heads started at 0.01, h_θ from 1000 with the renders averaged, F from 6000),
-    /// `code` (the released code: free offsets gated by |1/d - 1/d_F|, h_θ and F from 1500)
-    /// or `paper` (aperture K, scaling β, directions from h_θ; h_θ from 2000, F from 6000).
-    /// Default lens: on both dev scenes it learns the focus and beats 3dgs where code fell
-    /// behind (BENCHMARKS.md).
+    /// cocog: `paper` (aperture K, scaling β, directions from h_θ; h_θ from 2000 with the
+    /// renders averaged, F from 6000), `lens` (a thin lens per photo: the CoC radius follows
+    /// that photo's learned aperture and focus distance, h_θ shapes the copies inside it;
+    /// copies centred on their base, heads started at 0.01, h_θ from 1000, F from 6000) or
+    /// `code` (the released code: free offsets gated by |1/d - 1/d_F|, h_θ and F from 1500).
+    /// Default paper: at 7000 iterations on the dev scenes it leads lens on mean PSNR, LPIPS
+    /// and focus error, and code breaks the base (BENCHMARKS.md). Runs shorter than 7000
+    /// iterations start h_θ and F at the same shares of the run.
     #[arg(long = "coc-variant")]
     pub coc_variant: Option<String>,
     /// cocog: first iteration rendered through the CoC Gaussians (plain 3DGS before).
@@ -713,8 +713,8 @@ pub struct BenchArgs {
     /// the first timed iteration on. Default 3dgs.
     #[arg(long, value_enum, default_value_t = Method::Gs3d)]
     pub method: Method,
-    /// cocog: `lens`, `code` or `paper` (see `cocog train --help`). Default lens.
-    #[arg(long = "coc-variant", default_value = "lens")]
+    /// cocog: `paper`, `lens` or `code` (see `cocog train --help`). Default paper.
+    #[arg(long = "coc-variant", default_value = "paper")]
     pub coc_variant: String,
     /// cocog: CoC Gaussians per base Gaussian, M. Default: the variant's.
     #[arg(long = "coc-gaussians")]

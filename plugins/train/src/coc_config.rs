@@ -2,6 +2,9 @@
 
 use cocog_engine::coc::{CocConfig, CocVariant};
 
+/// The run length the variants' default starts were measured with (BENCHMARKS.md).
+pub const MEASURED_RUN: u32 = 7000;
+
 /// When and how the CoC sets join training. Defaults follow the chosen variant's source: the
 /// released code turns h_θ and F on together at 1500; the paper starts h_θ at 2000 with the
 /// sets averaged, and F at 6000.
@@ -65,6 +68,19 @@ impl CocTrainConfig {
         }
     }
 
+    /// The variant's blur and compositor starts fitted to a run of `iterations`: kept where
+    /// the run is as long as the 7000 iterations they were measured with, shrunk in
+    /// proportion where it is shorter, so a short run still warms up, blurs and composites in
+    /// the same shares instead of ending as plain 3DGS.
+    pub fn fit_to(&mut self, iterations: u32) {
+        let fit = |at: u32| {
+            let scaled = u64::from(at) * u64::from(iterations) / u64::from(MEASURED_RUN);
+            (scaled as u32).clamp(1, at)
+        };
+        self.blur_start = fit(self.blur_start);
+        self.composite_start = fit(self.composite_start);
+    }
+
     /// The configuration of a variant named as on the command line (`code` or `paper`).
     pub fn named(variant: &str) -> Result<Self, String> {
         CocVariant::parse(variant)
@@ -124,6 +140,19 @@ mod tests {
         (c.refocus_every, c.refocus_until) = (250, 2000);
         let at: Vec<u32> = (0..10_000).filter(|&it| c.refocuses_at(it)).collect();
         assert_eq!(at, [1250, 1500, 1750, 2000]);
+    }
+
+    #[test]
+    fn short_runs_keep_the_schedule_in_proportion() {
+        let mut c = CocTrainConfig::new(CocVariant::Paper);
+        c.fit_to(30_000);
+        assert_eq!((c.blur_start, c.composite_start), (2000, 6000));
+        c.fit_to(7000);
+        assert_eq!((c.blur_start, c.composite_start), (2000, 6000));
+        c.fit_to(700);
+        assert_eq!((c.blur_start, c.composite_start), (200, 600));
+        c.fit_to(1);
+        assert_eq!((c.blur_start, c.composite_start), (1, 1));
     }
 
     #[test]

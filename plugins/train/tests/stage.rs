@@ -53,7 +53,7 @@ fn train_stage_writes_gaussians_log_and_scene() {
         train.as_ref(),
         &scene_dir,
         &out,
-        json!({"iterations": 150, "downscale": 1, "seed": 3}),
+        json!({"method": "3dgs", "iterations": 150, "downscale": 1, "seed": 3}),
     )
     .unwrap();
     eprintln!("summary: {summary}");
@@ -148,6 +148,40 @@ fn train_stage_writes_gaussians_log_and_scene() {
     assert!(summary["gaussians"].as_u64().unwrap() > 0);
     assert!(half.join("gaussians.ply").exists());
     assert!(!half.join(".downscaled").exists());
+}
+
+/// With no method named the stage trains CoCoGaussian's paper variant, and a run shorter than
+/// the 7000 iterations its starts were measured with blurs and composites at the same shares.
+#[test]
+fn the_default_is_cocog_with_its_starts_fitted_to_the_run() {
+    if !gpu_available() {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let scene_dir = ingested(tmp.path());
+    let train = stage(cocog_train::stages(), "train");
+    let out = tmp.path().join("t");
+    let options = json!({"iterations": 7, "downscale": 2, "sh_degree": 0,
+        "compositor_channels": 4});
+    let summary = run(train.as_ref(), &scene_dir, &out, options).unwrap();
+    assert_eq!(summary["method"], "cocog", "{summary}");
+    let coc = &summary["resolved"]["coc"];
+    assert_eq!(coc["variant"], "paper", "{coc}");
+    // 2000 and 6000 of 7000, at 7 iterations.
+    assert_eq!(
+        (&coc["blur_start"], &coc["composite_start"]),
+        (&json!(2), &json!(6))
+    );
+    assert_eq!(summary["resolved"]["schedule"]["preset"], "deblur");
+    let scene = Scene::load(&out).unwrap();
+    assert!(scene.lens_model.is_some());
+    assert!(
+        scene
+            .views
+            .iter()
+            .filter(|v| v.split == Split::Train)
+            .all(|v| v.lens.as_ref().is_some_and(|l| l.focus_distance > 0.0))
+    );
 }
 
 #[test]

@@ -69,8 +69,8 @@ impl Schedule {
     pub fn from_request(req: &StageRequest) -> Result<Self, StageError> {
         let o = &req.options;
         let default = match o.get_str("method") {
-            Some("cocog") => "deblur",
-            _ => "auto",
+            Some("3dgs") => "auto",
+            _ => "deblur",
         };
         let mut s = Self::preset(o.get_str("schedule").unwrap_or(default))?;
         let d = &mut s.densify;
@@ -322,10 +322,13 @@ mod tests {
 
     fn request(given: Value) -> Result<StageRequest, StageError> {
         let given: Map<String, Value> = serde_json::from_value(given).unwrap();
+        // The stage's method option, which picks the default preset.
+        let mut specs = options();
+        specs.push(OptionSpec::string("method", "cocog", "cocog or 3dgs"));
         Ok(StageRequest {
             input: PathBuf::new(),
             output: PathBuf::new(),
-            options: Options::validate("train", &options(), &given)?,
+            options: Options::validate("train", &specs, &given)?,
         })
     }
 
@@ -336,8 +339,11 @@ mod tests {
         assert_eq!(inria.densify, DensifyConfig::default());
         assert_eq!(inria.scale, ScaleRule::CameraExtent);
         assert_eq!(inria.sh_interval, 1000);
-        let auto = Schedule::from_request(&request(json!({})).unwrap()).unwrap();
+        // Plain 3DGS gets `auto`; the default method, cocog, gets `deblur`.
+        let auto = Schedule::from_request(&request(json!({"method": "3dgs"})).unwrap()).unwrap();
         assert_eq!(auto.preset, "auto");
+        let deblur = Schedule::from_request(&request(json!({})).unwrap()).unwrap();
+        assert_eq!(deblur.preset, "deblur");
         assert_eq!(auto.scale, ScaleRule::CameraExtent);
         let expect = DensifyConfig {
             prune_large: 0.0,
