@@ -11,7 +11,7 @@
 #   9-full     the same at full size, 30000 iterations (#9)
 #   12-small   3dgs and cocog on dev-table and dev-shelf, --downscale 4, 7000 iterations (#12)
 #   12-full    the same at full size, 30000 iterations (#12)
-#   12-variants cocog's paper and code variants (--coc-variant) on both dev scenes, --downscale 4,
+#   12-variants cocog's lens and code variants (--coc-variant) on both dev scenes, --downscale 4,
 #              7000 iterations (#12 asks for both; 12-small trains the default)
 # On lavapipe (128 MiB bindings) 12-full's cocog runs are refused once F starts: F's maps at
 # 400×300 need 176 MiB; a failed run gets a `failed` row and the others go on.
@@ -71,7 +71,7 @@ for set in "${sets[@]}"; do
         12-small) for s in dev-table dev-shelf; do runs+=("$s 3dgs 4 7000" "$s cocog 4 7000"); done ;;
         12-full) for s in dev-table dev-shelf; do runs+=("$s 3dgs 1 30000" "$s cocog 1 30000"); done ;;
         12-variants) for s in dev-table dev-shelf; do
-            runs+=("$s cocog 4 7000 paper" "$s cocog 4 7000 code"); done ;;
+            runs+=("$s cocog 4 7000 lens" "$s cocog 4 7000 code"); done ;;
         *) echo "gates.sh: unknown set $set" >&2; usage ;;
     esac
 done
