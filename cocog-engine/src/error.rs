@@ -19,6 +19,18 @@ pub enum EngineError {
          fewer, smaller Gaussians"
     )]
     TooManyIntersections { needed: u32, most: u32 },
+    #[error(
+        "{gaussians} Gaussians at SH degree {sh_degree} need {needed_mib:.0} MiB in one buffer \
+         and this adapter binds at most {limit_mib:.0} MiB: at most {most} Gaussians fit (a \
+         lower SH degree or fewer Gaussians; a GPU binds more)"
+    )]
+    TooManyGaussians {
+        gaussians: u64,
+        sh_degree: u32,
+        most: u64,
+        needed_mib: f64,
+        limit_mib: f64,
+    },
     #[error("invalid input: {0}")]
     Invalid(String),
 }

@@ -146,3 +146,43 @@ fn empty_and_fully_culled_scenes_render_the_background() {
         assert!(img.alpha.iter().all(|&a| a == 0.0));
     }
 }
+
+/// A set whose SH buffer would exceed the adapter's buffer binding is refused with the count
+/// that fits, where wgpu would panic when binding it. Runs where the limit is small enough to
+/// reach with a few hundred MB of host memory (lavapipe: 128 MiB).
+#[test]
+fn a_set_wider_than_a_binding_is_refused_by_name() {
+    let Some(ctx) = gpu() else { return };
+    let limit = ctx.binding_limit();
+    if limit > 256 << 20 {
+        eprintln!("skipped: this adapter binds {} MiB", limit >> 20);
+        return;
+    }
+    // SH degree 3: 192 bytes a Gaussian in the SH buffer.
+    let n = (limit / 192 + 1) as usize;
+    let g = GaussianParams {
+        sh_degree: 3,
+        means: vec![[0.0, 0.0, 2.0]; n],
+        log_scales: vec![[-3.0; 3]; n],
+        quats: vec![[1.0, 0.0, 0.0, 0.0]; n],
+        opacity_logits: vec![0.0; n],
+        sh: vec![0.0; n * 48],
+    };
+    let e = cocog_engine::ParamBuffers::upload(ctx, &[&g])
+        .err()
+        .expect("refused");
+    let msg = e.to_string();
+    assert!(
+        msg.contains(&format!("{n} Gaussians at SH degree 3"))
+            && msg.contains(&format!("at most {} Gaussians fit", n - 1)),
+        "{msg}"
+    );
+    // One fewer fits, and uploads.
+    let mut fewer = g;
+    fewer.means.pop();
+    fewer.log_scales.pop();
+    fewer.quats.pop();
+    fewer.opacity_logits.pop();
+    fewer.sh.truncate((n - 1) * 48);
+    assert!(cocog_engine::ParamBuffers::upload(ctx, &[&fewer]).is_ok());
+}

@@ -36,10 +36,35 @@ pub struct ParamBuffers {
     pub shared_rows: u32,
 }
 
+/// Bytes per Gaussian of the engine's widest per-Gaussian buffer: the SH coefficients, or the
+/// 48-byte projected record at low degrees.
+pub fn bytes_per_gaussian(sh_degree: u32) -> u64 {
+    (12 * sh_coeffs_per_channel(sh_degree) as u64).max(48)
+}
+
+/// Refuses `gaussians` whose widest buffer would exceed a buffer binding of `limit` bytes,
+/// which wgpu would otherwise report as a validation panic when the buffer is bound.
+pub fn check_fits(limit: u64, gaussians: u64, sh_degree: u32) -> Result<(), EngineError> {
+    let per = bytes_per_gaussian(sh_degree);
+    if gaussians * per <= limit {
+        return Ok(());
+    }
+    let mib = |b: u64| b as f64 / f64::from(1u32 << 20);
+    Err(EngineError::TooManyGaussians {
+        gaussians,
+        sh_degree,
+        most: limit / per,
+        needed_mib: mib(gaussians * per),
+        limit_mib: mib(limit),
+    })
+}
+
 impl ParamBuffers {
     /// Uploads `sets` back to back.
     pub fn upload(ctx: &GpuContext, sets: &[&GaussianParams]) -> Result<Self, EngineError> {
         let sh_degree = sets.first().map_or(0, |s| s.sh_degree);
+        let total: u64 = sets.iter().map(|s| s.len() as u64).sum();
+        check_fits(ctx.binding_limit(), total, sh_degree)?;
         let mut all = GaussianParams {
             sh_degree,
             ..Default::default()
@@ -339,5 +364,26 @@ impl Batch {
 
     pub(crate) fn num_pixels(&self) -> u64 {
         u64::from(self.width()) * u64::from(self.height()) * u64::from(self.num_images())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_set_past_the_binding_is_refused_by_count() {
+        let limit = 128 << 20;
+        // SH 3: 48 coefficients × 4 bytes per Gaussian.
+        assert_eq!(bytes_per_gaussian(3), 192);
+        assert_eq!(bytes_per_gaussian(0), 48);
+        assert!(check_fits(limit, 699_050, 3).is_ok());
+        let e = check_fits(limit, 1_000_000, 3).unwrap_err().to_string();
+        assert!(
+            e.contains("1000000 Gaussians at SH degree 3 need 183 MiB")
+                && e.contains("at most 699050 Gaussians fit"),
+            "{e}"
+        );
+        assert!(check_fits(limit, 1_000_000, 0).is_ok());
     }
 }
