@@ -168,9 +168,9 @@ fn a_set_wider_than_a_binding_is_refused_by_name() {
         opacity_logits: vec![0.0; n],
         sh: vec![0.0; n * 48],
     };
-    let e = cocog_engine::ParamBuffers::upload(ctx, &[&g])
-        .err()
-        .expect("refused");
+    let Err(e) = cocog_engine::ParamBuffers::upload(ctx, &[&g]) else {
+        panic!("{n} Gaussians at SH 3 were uploaded past a {limit}-byte binding");
+    };
     let msg = e.to_string();
     assert!(
         msg.contains(&format!("{n} Gaussians at SH degree 3"))
