@@ -97,7 +97,7 @@ if has ingest-llff && has train && has render; then
     "$cocog" train "$work/scene" -o "$work/trained" "${train_args[@]}" >/dev/null
     "$cocog" render "$work/trained" -o "$work/renders" --split test >/dev/null
     pipeline_s="$(secs "$t0")"
-    score "cocog train ${train_args[*]:-(defaults)}" "$work/renders" "$pipeline_s"
+    score "cocog train ${train_args[*]:-(defaults: cocog, paper)}" "$work/renders" "$pipeline_s"
 else
     echo "defocus.sh: no ingest-llff/train/render stages yet: scoring baselines only" >&2
 fi

@@ -68,8 +68,8 @@ for set in "${sets[@]}"; do
     case "$set" in
         9-small) runs+=("sharp-dev 3dgs 4 7000" "dev-table 3dgs 4 7000") ;;
         9-full) runs+=("sharp-dev 3dgs 1 30000" "dev-table 3dgs 1 30000") ;;
-        12-small) for s in dev-table dev-shelf; do runs+=("$s 3dgs 4 7000" "$s cocog 4 7000"); done ;;
-        12-full) for s in dev-table dev-shelf; do runs+=("$s 3dgs 1 30000" "$s cocog 1 30000"); done ;;
+        12-small) for s in dev-table dev-shelf; do runs+=("$s 3dgs 4 7000" "$s cocog 4 7000 paper"); done ;;
+        12-full) for s in dev-table dev-shelf; do runs+=("$s 3dgs 1 30000" "$s cocog 1 30000 paper"); done ;;
         12-variants) for s in dev-table dev-shelf; do
             runs+=("$s cocog 4 7000 lens" "$s cocog 4 7000 code"); done ;;
         *) echo "gates.sh: unknown set $set" >&2; usage ;;
@@ -91,7 +91,6 @@ for run in "${runs[@]}"; do
     [[ -f "$out/.ingest-$scene/scene.json" ]] ||
         "$cocog" ingest colmap "$src" -o "$out/.ingest-$scene" -q --force >&2
 done
-t0=$SECONDS
 
 one_run() {
     local scene method down its variant src name rc=0 limit=()
@@ -99,13 +98,13 @@ one_run() {
     its="${iterations:-$its}"
     case "$scene" in sharp-dev) src="$scenes/sharp-dev" ;; *) src="$scenes/defocus-dev/$scene" ;; esac
     name="$scene-$method${variant:+-$variant}-d$down-$its"
+    # Run again into the same OUT, a finished run is kept and a stopped one continues.
+    [[ -f "$out/$name/metrics.json" ]] && return
     if [[ -n "$deadline" ]]; then
-        local left=$((deadline - (SECONDS - t0)))
+        local left=$((deadline - SECONDS))
         ((left > 0)) || { printf '%s\t%s\tnot started\n' "$name" "$its" | tee -a "$summary" >&2; return; }
         limit=(timeout --signal=INT --kill-after=60 "$left")
     fi
-    # Run again into the same OUT, a finished run is kept and a stopped one continues.
-    [[ -f "$out/$name/metrics.json" ]] && return
     local resume=()
     [[ -d "$out/$name.checkpoint" ]] && resume=(--resume "$out/$name.checkpoint")
     echo "gates: $name${resume[@]+ (continued)}" >&2
@@ -117,7 +116,7 @@ one_run() {
         >"$out/$name.log" 2>&1 || rc=$?
     if ((rc == 124)) && [[ -f "$out/$name.train-log.jsonl" ]]; then
         python3 "$root/bench/gates_row.py" "$out/$name.train-log.jsonl" "$name" "$its" stopped \
-            >>"$summary"
+            >>"$summary" || printf '%s\t%s\tstopped, unreadable log\n' "$name" "$its" >>"$summary"
     elif ((rc != 0)) ||
         ! "$cocog" eval "$out/$name" --downscale "$down" -q >/dev/null 2>>"$out/$name.log"; then
         printf '%s\t%s\tfailed\n' "$name" "$its" >>"$summary"
@@ -126,7 +125,8 @@ one_run() {
             "$cocog" lens "$out/$name" --truth "$src/transforms.json" --json >"$out/$name/lens.json" ||
                 rm -f "$out/$name/lens.json"
         fi
-        python3 "$root/bench/gates_row.py" "$out/$name" "$name" "$its" >>"$summary"
+        python3 "$root/bench/gates_row.py" "$out/$name" "$name" "$its" >>"$summary" ||
+            printf '%s\t%s\tfinished, unscored\n' "$name" "$its" >>"$summary"
     fi
     grep -F "$name	" "$summary" | tail -1 >&2
 }
@@ -136,4 +136,8 @@ for run in "${runs[@]}"; do
     one_run "$run" &
 done
 wait
-column -t -s $'\t' "$summary" >&2 || cat "$summary" >&2
+# A continued run has a row per call: keep each run's last.
+awk -F'\t' '{ if (!($1 in row)) order[++n] = $1; row[$1] = $0 }
+    END { for (i = 1; i <= n; i++) print row[order[i]] }' "$summary" >"$summary.tmp" &&
+    mv "$summary.tmp" "$summary"
+column -t -s $'\t' "$summary" >&2 2>/dev/null || cat "$summary" >&2

@@ -17,7 +17,7 @@
 set -uo pipefail
 
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-results="${1:?usage: bench/gpu-session.sh RESULTS [SECONDS]}"
+results="${1:?usage: bench/gpu-session.sh RESULTS [SECONDS [RESERVE]]}"
 budget="${2:-560}"
 reserve="${3:-120}"
 dev="${DEV:-$root/.device}"
@@ -62,10 +62,12 @@ fi
     --jobs 12 --deadline $(($(left) - reserve)) 2>"$results/gates.err"
 if [[ -n "${tests:-}" ]]; then
     while kill -0 "$tests" 2>/dev/null && (($(left) > 75)); do sleep 2; done
-    kids=$(pgrep -P "$tests")
-    kill "$tests" 2>/dev/null
-    [[ -n "$kids" ]] && kill $kids 2>/dev/null
-    echo "(tests stopped at $SECONDS s where still running)" >>"$results/tests.log"
+    if kill -0 "$tests" 2>/dev/null; then
+        kids=$(pgrep -P "$tests")
+        kill "$tests" 2>/dev/null
+        [[ -n "$kids" ]] && kill $kids 2>/dev/null
+        echo "(tests stopped at $SECONDS s, still running)" >>"$results/tests.log"
+    fi
 fi
 
 # 4. The same Gaussians through both steps.
@@ -83,5 +85,5 @@ fi
 tar czf "$results/gates.tgz" -C "$work" --exclude='*.ply' --exclude='*.checkpoint' \
     --exclude='checkpoint' --exclude='.ingest-*' g
 cp "$work/g/summary.tsv" "$results/" 2>/dev/null
-column -t -s $'\t' "$work/g/summary.tsv"
+column -t -s $'\t' "$work/g/summary.tsv" 2>/dev/null || cat "$work/g/summary.tsv"
 echo "gpu-session: done at $SECONDS s"
