@@ -284,7 +284,8 @@ stays beside OUTPUT.checkpoint and --resume continues both."
 pub struct TrainArgs {
     #[command(flatten)]
     pub io: SceneToScene,
-    /// Training method. Default cocog (on sharp photos 3dgs gives the same scene for less).
+    /// Training method. Default cocog; a resumed run keeps its checkpoint's. 3dgs is the
+    /// cheaper step for photos without depth-of-field blur.
     #[arg(long, value_enum)]
     pub method: Option<Method>,
     /// Training iterations, one view each. Default 7000 (3DGS's and the paper's long runs
@@ -301,13 +302,18 @@ pub struct TrainArgs {
     /// `code` (the released code: free offsets gated by |1/d - 1/d_F|, h_θ and F from 1500).
     /// Default paper: at 7000 iterations on the dev scenes it leads lens on mean PSNR, LPIPS
     /// and focus error, and code breaks the base (BENCHMARKS.md). Runs shorter than 7000
-    /// iterations start h_θ and F at the same shares of the run.
+    /// iterations start h_θ and F at the same shares of the run. A resumed run keeps its
+    /// checkpoint's variant.
     #[arg(long = "coc-variant")]
     pub coc_variant: Option<String>,
     /// cocog: first iteration rendered through the CoC Gaussians (plain 3DGS before).
+    /// Default: the variant's (paper 2000, lens 1000, code 1500), at the same share of a run
+    /// shorter than 7000 iterations; a resumed run keeps its own.
     #[arg(long = "blur-start")]
     pub blur_start: Option<u64>,
     /// cocog: first iteration composited by the CNN F (the renders are averaged before).
+    /// Default: the variant's (6000; code 1500), fitted like --blur-start; given alone, the
+    /// other start stays the variant's unfitted one.
     #[arg(long = "composite-start")]
     pub composite_start: Option<u64>,
     /// cocog: hidden channels of F. Default 64 (as published); 8–16 train far faster on a CPU.

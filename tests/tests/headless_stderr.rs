@@ -43,7 +43,16 @@ fn gpu_commands_print_no_error_without_a_runtime_dir() {
     let out = cocog(&["ingest", "llff", data, "-o", scene]);
     assert!(out.status.success(), "{}", stderr(&out));
 
-    let train = ["train", scene, "-o", trained, "--iterations", "20"];
+    let train = [
+        "train",
+        scene,
+        "-o",
+        trained,
+        "--iterations",
+        "20",
+        "--method",
+        "3dgs",
+    ];
     assert_quiet_success("train", &headless(&train));
     assert_quiet_success("render", &headless(&["render", trained, "-o", renders]));
     let eval = ["eval", trained, "-o", metrics_s, "--lpips", "off"];

@@ -110,6 +110,11 @@ fn train_args<'a>(scene: &'a Path, out: &'a Path) -> Vec<&'a str> {
         path_str(out),
         "--iterations",
         ITERATIONS,
+        // CoCoGaussian, the default, named: its lens model must resume exactly too.
+        "--method",
+        "cocog",
+        "--compositor-channels",
+        "8",
         "--checkpoint-every",
         "20",
         "--seed",
@@ -170,7 +175,7 @@ fn a_sigkilled_pipeline_resumes_its_training_stage() {
         &pipeline,
         format!(
             "[pipeline]\ninput = \"data\"\noutput = \"out\"\nstages = [\"ingest-llff\", \"train\"]\n\
-             [train]\niterations = {ITERATIONS}\ncheckpoint_every = {EVERY}\nseed = 5\n"
+             [train]\nmethod = \"3dgs\"\niterations = {ITERATIONS}\ncheckpoint_every = {EVERY}\nseed = 5\n"
         ),
     )
     .expect("write pipeline");

@@ -46,7 +46,14 @@ fn the_log_is_watchable_while_training_and_scored_with_eval_every() {
     // While it runs, the log is beside the (not yet existing) output and already has readings.
     let (out, live) = (p("t"), p("t.train-log.jsonl"));
     let mut child = Command::new(cocog_bin())
-        .args(["train", path_str(&p("s")), "-o", path_str(&out)])
+        .args([
+            "train",
+            path_str(&p("s")),
+            "-o",
+            path_str(&out),
+            "--method",
+            "3dgs",
+        ])
         .args([
             "--iterations",
             "60",
@@ -148,6 +155,8 @@ fn json_results_name_the_output() {
             path_str(&t),
             "--iterations",
             "10",
+            "--method",
+            "3dgs",
         ],
         &t,
     );

@@ -35,6 +35,10 @@ pub struct CocCheckpoint {
     pub centred: bool,
     pub modulate_base: bool,
     pub compositor_channels: u32,
+    /// The blur and compositor starts the run trained with, kept on resume unless given
+    /// (they are fitted to the run's length, which a resume may change); `None` in older
+    /// checkpoints.
+    pub starts: Option<[u32; 2]>,
     pub mlp: Vec<f32>,
     pub mlp_moments: MomentState,
     pub compositor: Vec<f32>,
@@ -144,6 +148,12 @@ impl TrainState {
                 ("coc_modulate_base", c.modulate_base.to_string()),
                 ("coc_compositor_channels", c.compositor_channels.to_string()),
             ]);
+            if let Some([blur, composite]) = c.starts {
+                coc_meta.extend([
+                    ("coc_blur_start", blur.to_string()),
+                    ("coc_composite_start", composite.to_string()),
+                ]);
+            }
             if let Some(f) = &c.focus {
                 tensors.push(("coc.focus".into(), f.values.clone()));
                 tensors.push(("adam.coc_focus.m".into(), f.moments.m.clone()));
@@ -329,6 +339,13 @@ impl<'a> Reader<'a> {
             centred: self.text("coc_centred")? == "true",
             modulate_base: self.text("coc_modulate_base")? == "true",
             compositor_channels: self.number("coc_compositor_channels")?,
+            starts: match self.meta.contains_key("coc_blur_start") {
+                true => Some([
+                    self.number("coc_blur_start")?,
+                    self.number("coc_composite_start")?,
+                ]),
+                false => None,
+            },
             mlp,
             mlp_moments,
             compositor,
@@ -453,6 +470,7 @@ mod tests {
             centred: true,
             modulate_base: false,
             compositor_channels: 8,
+            starts: Some([200, 600]),
             mlp: vec![0.25; 7],
             mlp_moments: moments(7, 1.0),
             compositor: vec![-0.5; 4],

@@ -45,7 +45,7 @@ impl CocTrainConfig {
     pub fn new(variant: CocVariant) -> Self {
         // The lens variant is ours, so its defaults are the settings it was measured with on
         // the dev scenes (BENCHMARKS.md): h_θ from 1000, copies centred on their base, heads
-        // started small. F starts at the paper's 6000, past every measured run.
+        // started small, F from the paper's 6000.
         let (blur_start, composite_start, centred, head_init_scale) = match variant {
             CocVariant::Code => (1500, 1500, false, 1.0),
             CocVariant::Paper => (2000, 6000, false, 1.0),
@@ -75,7 +75,7 @@ impl CocTrainConfig {
     pub fn fit_to(&mut self, iterations: u32) {
         let fit = |at: u32| {
             let scaled = u64::from(at) * u64::from(iterations) / u64::from(MEASURED_RUN);
-            (scaled as u32).clamp(1, at)
+            (scaled as u32).max(1).min(at)
         };
         self.blur_start = fit(self.blur_start);
         self.composite_start = fit(self.composite_start);

@@ -17,7 +17,7 @@ use serde_json::{Value, json};
 
 use cocog_engine::coc::CocVariant;
 
-use crate::{CocTrainConfig, TrainConfig, TrainState, Trainer};
+use crate::{CocCheckpoint, CocTrainConfig, TrainConfig, TrainState, Trainer};
 use schedule::Schedule;
 use test_eval::TestViews;
 
@@ -29,32 +29,36 @@ pub struct Train;
 
 fn options() -> Vec<OptionSpec> {
     let mut specs = vec![
-        OptionSpec::string(
+        OptionSpec::optional(
             "method",
-            "cocog",
-            "cocog (CoCoGaussian: learns the defocus of each photo, keeps sharp base Gaussians) \
-             or 3dgs (vanilla INRIA, about 2.8× cheaper a step)",
+            OptionKind::String,
+            "cocog (CoCoGaussian: learns the defocus of each photo, keeps sharp base Gaussians; \
+             the default) or 3dgs (vanilla INRIA, about 2.8× cheaper a step); a resumed run \
+             keeps its checkpoint's",
         ),
-        OptionSpec::string(
+        OptionSpec::optional(
             "coc_variant",
-            "paper",
+            OptionKind::String,
             "cocog: paper (aperture, scaling, directions from h_θ; 5 copies, h_θ from 2000, F \
              from 6000; the best on the dev scenes), lens (a thin lens per photo: the CoC radius \
              from that photo's learned aperture and focus, β and directions from h_θ; 5 copies \
              centred on their base, h_θ from 1000, F from 6000) or code (the released code: free \
              offsets gated by |1/d - 1/d_F|, 4 copies, h_θ and F from 1500; breaks the base on \
-             the dev scenes). Runs shorter than 7000 iterations start h_θ and F in proportion",
+             the dev scenes); a resumed run keeps its checkpoint's. Runs shorter than 7000 \
+             iterations start h_θ and F at the same shares of the run unless either start is \
+             given",
         ),
         OptionSpec::int(
             "blur_start",
             0,
-            "cocog: first iteration through the CoC sets (plain 3DGS before); 0 = the variant's",
+            "cocog: first iteration through the CoC sets (plain 3DGS before); 0 = the variant's \
+             (fitted to runs shorter than 7000 iterations; a resumed run's own)",
         ),
         OptionSpec::int(
             "composite_start",
             0,
             "cocog: first iteration composited by the CNN F (the sets are averaged before); \
-             0 = the variant's",
+             0 = the variant's (fitted like blur_start)",
         ),
         OptionSpec::optional(
             "coc_centred",
@@ -199,9 +203,24 @@ fn log_interval(iterations: u32) -> u32 {
     (iterations / 10).clamp(1, 100)
 }
 
-/// CoCoGaussian's configuration when `method` is cocog, `None` for 3dgs.
-fn coc_config(req: &StageRequest, iterations: u32) -> Result<Option<CocTrainConfig>, StageError> {
-    match req.options.get_str("method").unwrap_or("cocog") {
+/// The method to train: option `method`, else a resumed checkpoint's, else cocog.
+fn method<'a>(req: &'a StageRequest, resumed: Option<&TrainState>) -> &'a str {
+    match (req.options.get_str("method"), resumed) {
+        (Some(m), _) => m,
+        (None, Some(s)) if s.coc.is_none() => "3dgs",
+        (None, _) => "cocog",
+    }
+}
+
+/// CoCoGaussian's configuration when `method` is cocog, `None` for 3dgs. A resumed lens model
+/// lends its variant and starts to options not given.
+fn coc_config(
+    req: &StageRequest,
+    iterations: u32,
+    method: &str,
+    resumed: Option<&CocCheckpoint>,
+) -> Result<Option<CocTrainConfig>, StageError> {
+    match method {
         "3dgs" => return Ok(None),
         "cocog" => {}
         other => {
@@ -210,7 +229,11 @@ fn coc_config(req: &StageRequest, iterations: u32) -> Result<Option<CocTrainConf
             )));
         }
     }
-    let name = req.options.get_str("coc_variant").unwrap_or("paper");
+    let name = req
+        .options
+        .get_str("coc_variant")
+        .or(resumed.map(|k| k.variant.as_str()))
+        .unwrap_or("paper");
     let variant = CocVariant::parse(name).ok_or_else(|| {
         StageError::Options(format!(
             "stage 'train' option 'coc_variant': unknown variant '{name}' (use code, paper or \
@@ -218,19 +241,30 @@ fn coc_config(req: &StageRequest, iterations: u32) -> Result<Option<CocTrainConf
         ))
     })?;
     let mut c = CocTrainConfig::new(variant);
-    c.fit_to(iterations);
     let copies = int(req, "coc_gaussians", 0, 16)? as u32;
     if copies > 0 {
         c.net.copies = copies;
     }
     let limit = i64::from(u32::MAX);
     let blur = int(req, "blur_start", 0, limit)? as u32;
-    if blur > 0 {
-        c.blur_start = blur;
-    }
     let composite = int(req, "composite_start", 0, limit)? as u32;
-    if composite > 0 {
-        c.composite_start = composite;
+    match (blur, composite, resumed) {
+        // A resumed run keeps its starts: they were fitted to the length it was started with.
+        (0, 0, Some(k)) => {
+            if let Some([b, f]) = k.starts {
+                (c.blur_start, c.composite_start) = (b, f);
+            }
+        }
+        (0, 0, None) => c.fit_to(iterations),
+        // A start given explicitly leaves the other at the variant's.
+        _ => {
+            if blur > 0 {
+                c.blur_start = blur;
+            }
+            if composite > 0 {
+                c.composite_start = composite;
+            }
+        }
     }
     c.compositor_channels = int(req, "compositor_channels", 1, 256)? as u32;
     if let Some(centred) = req.options.get_bool("coc_centred") {
@@ -282,10 +316,16 @@ struct Plan {
     eval_every: u32,
 }
 
-fn plan(req: &StageRequest) -> Result<Plan, StageError> {
+fn plan(req: &StageRequest, resumed: Option<&TrainState>) -> Result<Plan, StageError> {
     let iterations = int(req, "iterations", 1, i64::from(u32::MAX))? as u32;
-    let coc = coc_config(req, iterations)?;
-    let schedule = Schedule::from_request(req)?;
+    let method = method(req, resumed);
+    let coc = coc_config(
+        req,
+        iterations,
+        method,
+        resumed.and_then(|s| s.coc.as_ref()),
+    )?;
+    let schedule = Schedule::from_request(req, method)?;
     Ok(Plan {
         config: TrainConfig {
             densify: Some(schedule.densify.clone()),
@@ -337,12 +377,20 @@ fn refuse_foreign_checkpoint(plan: &Plan) -> Result<(), StageError> {
     )))
 }
 
-/// The checkpoint to resume from, refused if it cannot continue this run.
-fn load_resume(plan: &Plan) -> Result<Option<TrainState>, StageError> {
-    let Some(path) = &plan.resume else {
+/// The checkpoint option `resume` names, read before the plan: its method, variant and
+/// starts are the defaults of a resumed run.
+fn load_resume(req: &StageRequest) -> Result<Option<TrainState>, StageError> {
+    req.options
+        .get_path("resume")
+        .map(|path| TrainState::load(&path).map_err(|e| StageError::Input(e.to_string())))
+        .transpose()
+}
+
+/// `state`, refused if it cannot continue this run.
+fn check_resume(plan: &Plan, state: Option<TrainState>) -> Result<Option<TrainState>, StageError> {
+    let (Some(path), Some(state)) = (&plan.resume, state) else {
         return Ok(None);
     };
-    let state = TrainState::load(path).map_err(|e| StageError::Input(e.to_string()))?;
     let what = format!("option 'resume' ({})", path.display());
     if let (Some(k), None) = (&state.coc, &plan.config.coc) {
         return Err(StageError::Options(format!(
@@ -386,9 +434,10 @@ impl Stage for Train {
     }
 
     fn run(&self, req: &StageRequest, ctx: &dyn Context) -> Result<Value, StageError> {
-        let mut plan = plan(req)?;
+        let resume = load_resume(req)?;
+        let mut plan = plan(req, resume.as_ref())?;
         refuse_foreign_checkpoint(&plan)?;
-        let resume = load_resume(&plan)?;
+        let resume = check_resume(&plan, resume)?;
         let mut scene = Scene::load(&req.input)?;
         scene.rebase(&req.input)?;
         // The scale comes from the initial points even when resuming, so a resumed run
@@ -458,6 +507,13 @@ impl Stage for Train {
         let mut session =
             session::Session::new(trainer, &plan, &req.output, test, &start_record, ctx)?;
         let outcome = session.run(ctx)?;
+        let capped = session.trainer.growth_capped_at();
+        if let Some(most) = capped {
+            ctx.warn(&format!(
+                "density control stopped growing the set at {most} Gaussians: {adapter} binds \
+                 no larger buffer for this run (a GPU binds more; or --sh-degree lower)"
+            ));
+        }
 
         let gaussians = session.trainer.gaussians().map_err(StageError::other)?;
         let ply = req.output.join("gaussians.ply");
@@ -498,6 +554,7 @@ impl Stage for Train {
             "it_per_s": outcome.it_per_s,
             "adapter": adapter,
             "last_psnr_drop": outcome.last_drop.map(|d| d.iteration),
+            "growth_capped_at": capped,
             "test_psnr": outcome.test.as_ref().map(|t| t.psnr),
             "test_ssim": outcome.test.as_ref().and_then(|t| t.ssim),
             "method": if plan.config.coc.is_some() { "cocog" } else { "3dgs" },

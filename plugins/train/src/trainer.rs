@@ -13,6 +13,7 @@ use crate::{
 };
 
 mod binding;
+mod cap;
 mod capacity;
 mod coc;
 mod coc_step;
@@ -248,6 +249,10 @@ pub struct Trainer<'c> {
     profiling: bool,
     /// Densify through the CPU rule even where the doubled set fits a binding.
     cpu_densification: bool,
+    /// The most Gaussians this run's buffers can bind (`cap.rs`); density control grows the
+    /// set no further, and `capped` says where it stopped.
+    most: u32,
+    capped: Option<u32>,
 }
 
 impl<'c> Trainer<'c> {
@@ -285,6 +290,8 @@ impl<'c> Trainer<'c> {
         let (w, h) = (views[0].camera.width, views[0].camera.height);
         binding::check(w, h, &config, ctx.binding_limit(), &ctx.adapter_name())
             .map_err(TrainError::Invalid)?;
+        cap::check(state.params.num_gaussians, &config, ctx.binding_limit())?;
+        let most = cap::most_gaussians(&config, ctx.binding_limit());
         let cameras: Vec<Camera> = views.iter().map(|v| v.camera).collect();
         let scene_scale = match config.scene_scale {
             Some(s) if s.is_finite() && s > 0.0 => s,
@@ -340,6 +347,8 @@ impl<'c> Trainer<'c> {
             iteration: state.iteration,
             profiling: false,
             cpu_densification: false,
+            most,
+            capped: None,
             config,
         };
         trainer.capacity = trainer.measure_capacity()?;
@@ -362,6 +371,17 @@ impl<'c> Trainer<'c> {
         self.cpu_densification = on;
     }
 
+    /// Lowers the most Gaussians density control grows the set to (the adapter's binding sets
+    /// it; tests reach it with a small cap).
+    pub fn set_gaussian_cap(&mut self, most: u32) {
+        self.most = most.min(self.most);
+    }
+
+    /// The count density control stopped growing at, when the cap was reached.
+    pub fn growth_capped_at(&self) -> Option<u32> {
+        self.capped
+    }
+
     pub fn config(&self) -> &TrainConfig {
         &self.config
     }
@@ -371,9 +391,9 @@ impl<'c> Trainer<'c> {
         self.scene_scale
     }
 
-    /// Whether step `it` changes the Gaussian set instead of training it (densification,
-    /// point addition, opacity reset): such a step makes no optimizer update, so the model
-    /// worth scoring "at" `it` is the one before it, as INRIA's test report sees it.
+    /// Whether step `it` changes the Gaussian set after its optimiser update (densification,
+    /// point addition, opacity reset), leaving new Gaussians untrained, so the model worth
+    /// scoring "at" `it` is the one before it, as INRIA's test report sees it.
     pub fn restructures_at(&self, it: u32) -> bool {
         self.density_at(it)
             .is_some_and(|d| d.densifies_at(it) || d.adds_points_at(it) || d.resets_opacity_at(it))

@@ -488,3 +488,54 @@ fn the_last_iteration_neither_densifies_nor_resets_opacities() {
         "iteration 40 of 60 should reset opacities (largest logit {top})"
     );
 }
+
+/// A set at the run's cap (the adapter's binding, lowered here) stops growing: densification
+/// still prunes but neither clones nor splits, and the trainer says where it stopped.
+#[test]
+fn density_control_stops_growing_at_the_cap() {
+    let Some(ctx) = gpu() else { return };
+    let mut rng = SplitMix64::new(8);
+    let s = scene(ctx, &mut rng);
+    let init = noisy_init(&s.truth, 2, &mut rng);
+    let config = TrainConfig {
+        iterations: 120,
+        max_sh_degree: 0,
+        seed: 4,
+        loss_every: 0,
+        densify: Some(DensifyConfig {
+            from_iter: 10,
+            until_iter: 110,
+            interval: 20,
+            opacity_reset_interval: 0,
+            grad_threshold: 5e-5,
+            ..DensifyConfig::default()
+        }),
+        ..TrainConfig::default()
+    };
+    let run = |cap: Option<u32>| {
+        let mut trainer = Trainer::new(ctx, &init, &s.train, config.clone()).unwrap();
+        if let Some(c) = cap {
+            trainer.set_gaussian_cap(c);
+        }
+        let mut most = 0;
+        for _ in 0..120 {
+            trainer.step().unwrap();
+            most = most.max(trainer.gaussians().unwrap().len());
+        }
+        (most, trainer.growth_capped_at())
+    };
+    let (free, none) = run(None);
+    assert!(none.is_none());
+    let cap = (init.len() + (free - init.len()) / 3) as u32;
+    eprintln!("uncapped peak {free}, cap {cap}");
+    assert!(
+        free > cap as usize,
+        "the uncapped run must grow past the cap"
+    );
+    let (capped, at) = run(Some(cap));
+    assert_eq!(at, Some(cap));
+    assert!(
+        capped <= cap as usize,
+        "{capped} Gaussians past the cap {cap}"
+    );
+}

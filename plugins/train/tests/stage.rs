@@ -150,6 +150,50 @@ fn train_stage_writes_gaussians_log_and_scene() {
     assert!(!half.join(".downscaled").exists());
 }
 
+/// A resumed run without `method` keeps its checkpoint's method, and a cocog run keeps the
+/// starts it was fitted to even when the resume asks for more iterations.
+#[test]
+fn a_resume_keeps_the_checkpoints_method_and_starts() {
+    if !gpu_available() {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let scene_dir = ingested(tmp.path());
+    let train = stage(cocog_train::stages(), "train");
+    let small = json!({"downscale": 2, "sh_degree": 0, "compositor_channels": 4});
+    let with = |extra: Value| {
+        let mut o = small.clone();
+        o.as_object_mut()
+            .unwrap()
+            .extend(extra.as_object().unwrap().clone());
+        o
+    };
+    let plain = tmp.path().join("plain");
+    let opts = with(json!({"method": "3dgs", "iterations": 6}));
+    run(train.as_ref(), &scene_dir, &plain, opts).unwrap();
+    let more = with(json!({"iterations": 8, "resume": plain.display().to_string()}));
+    let summary = run(train.as_ref(), &scene_dir, &tmp.path().join("p2"), more).unwrap();
+    assert_eq!(summary["method"], "3dgs", "{summary}");
+    assert_eq!(summary["resolved"]["schedule"]["preset"], "auto");
+
+    let coc = tmp.path().join("coc");
+    run(
+        train.as_ref(),
+        &scene_dir,
+        &coc,
+        with(json!({"iterations": 14})),
+    )
+    .unwrap();
+    let more = with(json!({"iterations": 70, "resume": coc.display().to_string()}));
+    let summary = run(train.as_ref(), &scene_dir, &tmp.path().join("c2"), more).unwrap();
+    assert_eq!(summary["method"], "cocog", "{summary}");
+    let resolved = &summary["resolved"]["coc"];
+    // Fitted to 14 iterations (2000 and 6000 of 7000), not to the 70 asked for now.
+    assert_eq!(resolved["blur_start"], 4, "{resolved}");
+    assert_eq!(resolved["composite_start"], 12, "{resolved}");
+    assert_eq!(resolved["variant"], "paper", "{resolved}");
+}
+
 /// With no method named the stage trains CoCoGaussian's paper variant, and a run shorter than
 /// the 7000 iterations its starts were measured with blurs and composites at the same shares.
 #[test]
@@ -257,7 +301,9 @@ fn an_interrupted_run_leaves_a_checkpoint_that_resumes_to_the_end() {
     let scene_dir = ingested(tmp.path());
     let train = stage(cocog_train::stages(), "train");
     let ckpt = tmp.path().join("run.checkpoint");
+    // CoCoGaussian on purpose (h_θ from 17, F from 51 of 60): its lens model must resume too.
     let options = json!({
+        "method": "cocog", "compositor_channels": 8,
         "iterations": 60, "seed": 2, "sh_degree": 1, "random_background": true,
         "checkpoint_dir": ckpt.display().to_string(), "checkpoint_every": 0,
     });
@@ -356,7 +402,7 @@ fn the_live_log_is_told_and_the_test_views_are_scored_into_it() {
     let train = stage(cocog_train::stages(), "train");
     let live = tmp.path().join("run.train-log.jsonl");
     let given = json!({
-        "iterations": 50, "eval_every": 20, "seed": 4,
+        "method": "3dgs", "iterations": 50, "eval_every": 20, "seed": 4,
         "live_log": live.display().to_string(),
     });
     let opts = Options::validate("train", &train.info().options, given.as_object().unwrap());

@@ -65,11 +65,11 @@ impl Schedule {
     }
 
     /// The preset named by option `schedule` (by default `deblur` for CoCoGaussian and
-    /// `auto` for plain 3DGS), with every override given applied.
-    pub fn from_request(req: &StageRequest) -> Result<Self, StageError> {
+    /// `auto` for plain 3DGS, as `method` says), with every override given applied.
+    pub fn from_request(req: &StageRequest, method: &str) -> Result<Self, StageError> {
         let o = &req.options;
-        let default = match o.get_str("method") {
-            Some("3dgs") => "auto",
+        let default = match method {
+            "3dgs" => "auto",
             _ => "deblur",
         };
         let mut s = Self::preset(o.get_str("schedule").unwrap_or(default))?;
@@ -322,27 +322,24 @@ mod tests {
 
     fn request(given: Value) -> Result<StageRequest, StageError> {
         let given: Map<String, Value> = serde_json::from_value(given).unwrap();
-        // The stage's method option, which picks the default preset.
-        let mut specs = options();
-        specs.push(OptionSpec::string("method", "cocog", "cocog or 3dgs"));
         Ok(StageRequest {
             input: PathBuf::new(),
             output: PathBuf::new(),
-            options: Options::validate("train", &specs, &given)?,
+            options: Options::validate("train", &options(), &given)?,
         })
     }
 
     #[test]
     fn inria_preset_is_the_original_rules_and_auto_drops_only_the_large_prune() {
-        let inria = Schedule::from_request(&request(json!({"schedule": "inria"})).unwrap());
+        let inria = Schedule::from_request(&request(json!({"schedule": "inria"})).unwrap(), "3dgs");
         let inria = inria.unwrap();
         assert_eq!(inria.densify, DensifyConfig::default());
         assert_eq!(inria.scale, ScaleRule::CameraExtent);
         assert_eq!(inria.sh_interval, 1000);
         // Plain 3DGS gets `auto`; the default method, cocog, gets `deblur`.
-        let auto = Schedule::from_request(&request(json!({"method": "3dgs"})).unwrap()).unwrap();
+        let auto = Schedule::from_request(&request(json!({})).unwrap(), "3dgs").unwrap();
         assert_eq!(auto.preset, "auto");
-        let deblur = Schedule::from_request(&request(json!({})).unwrap()).unwrap();
+        let deblur = Schedule::from_request(&request(json!({})).unwrap(), "cocog").unwrap();
         assert_eq!(deblur.preset, "deblur");
         assert_eq!(auto.scale, ScaleRule::CameraExtent);
         let expect = DensifyConfig {
@@ -352,7 +349,7 @@ mod tests {
         assert_eq!(auto.densify, expect);
         let depth = request(json!({"scene_scale": "depth"})).unwrap();
         assert_eq!(
-            Schedule::from_request(&depth).unwrap().scale,
+            Schedule::from_request(&depth, "3dgs").unwrap().scale,
             ScaleRule::Depth
         );
     }
@@ -365,7 +362,7 @@ mod tests {
             "prune_opacity": 0.01, "prune_large": 0.0, "opacity_reset_every": 0, "sh_every": 50,
         }))
         .unwrap();
-        let s = Schedule::from_request(&req).unwrap();
+        let s = Schedule::from_request(&req, "3dgs").unwrap();
         let r = s.record(2.5);
         for (key, want) in [
             ("densify_from", 10.0),
@@ -402,7 +399,7 @@ mod tests {
             (json!({"densify_grad": -1.0}), "densify_grad"),
         ] {
             let err = request(given)
-                .and_then(|r| Schedule::from_request(&r))
+                .and_then(|r| Schedule::from_request(&r, "3dgs"))
                 .unwrap_err()
                 .to_string();
             assert!(err.contains(name), "{err}");

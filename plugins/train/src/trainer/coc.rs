@@ -168,6 +168,7 @@ impl CocState {
             centred: net.centred,
             modulate_base: net.modulate_base,
             compositor_channels: self.config.compositor_channels,
+            starts: Some([self.config.blur_start, self.config.composite_start]),
             mlp: ctx.read(&self.weights, net.mlp().len)?,
             mlp_moments: download(ctx, &self.weights_m)?,
             compositor: ctx.read(&self.f_params, self.compositor.layout().len)?,

@@ -41,9 +41,12 @@ fn regather(
 impl<'c> Trainer<'c> {
     /// Whether densifying `n` Gaussians can run on the GPU: every group must hold 2n rows
     /// within a buffer binding. Otherwise `densify_on_cpu` does it.
+    /// Also where 2n would pass the run's cap: the CPU path holds the set to it.
     pub(super) fn densifies_on_gpu(&self, n: u32) -> bool {
         let limit = self.ctx.binding_limit();
-        !self.cpu_densification && fits(u64::from(2 * n), self.sh_stride(), limit)
+        !self.cpu_densification
+            && 2 * u64::from(n) <= u64::from(self.most)
+            && fits(u64::from(2 * n), self.sh_stride(), limit)
     }
 
     /// Floats of SH per Gaussian.
@@ -210,15 +213,26 @@ impl<'c> Trainer<'c> {
             seed: self.config.seed,
             iteration: it,
         };
-        let plan = plan_densify(
-            &g,
-            &grads,
-            self.scene_scale,
-            config.prunes_large_at(it),
-            config,
-            &noise,
-            Some(&self.depth_axis),
-        );
+        let plan_with = |config: &DensifyConfig| {
+            plan_densify(
+                &g,
+                &grads,
+                self.scene_scale,
+                config.prunes_large_at(it),
+                config,
+                &noise,
+                Some(&self.depth_axis),
+            )
+        };
+        let mut plan = plan_with(config);
+        if plan.origins.len() > self.most as usize {
+            // At the cap: prune as usual, but neither clone nor split.
+            plan = plan_with(&DensifyConfig {
+                grad_threshold: f32::INFINITY,
+                ..config.clone()
+            });
+            self.capped = Some(self.most);
+        }
         if plan.origins.is_empty() {
             return Err(TrainError::Invalid(format!(
                 "densification at iteration {it} pruned every Gaussian"
@@ -250,9 +264,13 @@ impl<'c> Trainer<'c> {
         self.settle()?;
         let ctx = self.ctx;
         let g = self.gaussians()?;
+        let room = (self.most as usize).saturating_sub(g.len());
+        if room < config.add_points_count as usize {
+            self.capped = Some(self.most);
+        }
         let (dense, added) = crate::add_points(
             &g,
-            config.add_points_count as usize,
+            room.min(config.add_points_count as usize),
             f64::from(config.add_points_distance),
             &mut self.rng,
         );
