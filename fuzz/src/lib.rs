@@ -281,6 +281,7 @@ fn coc_checkpoint(views: usize) -> cocog_train::CocCheckpoint {
         centred: true,
         modulate_base: false,
         compositor_channels: 8,
+        starts: Some([1000, 6000]),
         mlp: vec![0.1; 12],
         mlp_moments: moments(12),
         compositor: vec![-0.2; 6],
