@@ -351,7 +351,8 @@ impl<'c> Trainer<'c> {
             capped: None,
             config,
         };
-        trainer.capacity = trainer.measure_capacity()?;
+        let room = trainer.measure_capacity()?;
+        trainer.set_room(room);
         if let Some(c) = trainer.coc.as_ref().filter(|c| c.focus.is_some()) {
             // A resumed blurred phase renders M + 1 copies of every Gaussian from its first step.
             trainer.capacity = trainer.capacity.saturating_mul(c.sets());
@@ -369,6 +370,13 @@ impl<'c> Trainer<'c> {
     /// for a doubled buffer take, whatever their size: what its trainer-level test runs.
     pub fn force_cpu_densification(&mut self, on: bool) {
         self.cpu_densification = on;
+    }
+
+    /// Renders as if a buffer binding held `bytes` (tests reach the intersection limit with
+    /// it), and holds the room within it.
+    pub fn set_render_binding_limit(&mut self, bytes: u64) {
+        self.renderer = Renderer::new(self.ctx).with_binding_limit(bytes);
+        self.set_room(self.capacity);
     }
 
     /// Lowers the most Gaussians density control grows the set to (the adapter's binding sets
@@ -631,6 +639,13 @@ impl<'c> Trainer<'c> {
             let word = |i: usize| words.get(i).copied().unwrap_or(0);
             let (overflowed, needed) = (word(0) != 0, word(1));
             self.note_intersections(needed);
+            let most = self.most_intersections();
+            if overflowed && needed > most {
+                // Retrying would overflow forever.
+                return Err(
+                    cocog_engine::EngineError::TooManyIntersections { needed, most }.into(),
+                );
+            }
             if overflowed {
                 self.redo.push_back(step.view);
                 continue;

@@ -55,3 +55,36 @@ fn an_overflowed_step_is_skipped_on_the_gpu_and_its_view_trained_again() {
     );
     assert_ne!(trainer.gaussians().unwrap(), before);
 }
+
+/// A view that needs more intersections than a binding holds cannot train on this adapter:
+/// the room stops at the binding, and the overflow that follows is an error naming both
+/// counts instead of a retry that would overflow forever.
+#[test]
+fn a_view_past_the_intersection_binding_is_an_error() {
+    let Some(ctx) = gpu() else { return };
+    let mut rng = SplitMix64::new(8);
+    let s = scene(ctx, &mut rng);
+    let init = noisy_init(&s.truth, 2, &mut rng);
+    let config = TrainConfig {
+        iterations: 40,
+        max_sh_degree: 0,
+        densify: None,
+        seed: 9,
+        ..TrainConfig::default()
+    };
+    let mut trainer = Trainer::new(ctx, &init, &s.train, config).unwrap();
+    trainer.step().unwrap();
+    trainer.finish().unwrap();
+    // Room for 16 intersections: far fewer than any view of the scene needs.
+    trainer.set_render_binding_limit(64);
+    assert_eq!(trainer.intersection_capacity(), 16);
+    let err = (0..10)
+        .map(|_| trainer.step().and_then(|_| trainer.finish().map(|_| ())))
+        .find_map(Result::err)
+        .expect("an error within 10 steps");
+    let msg = err.to_string();
+    assert!(
+        msg.contains("tile intersections") && msg.contains("holds 16"),
+        "{msg}"
+    );
+}

@@ -42,10 +42,20 @@ impl Trainer<'_> {
         Ok(with_headroom(most))
     }
 
+    /// The most room a binding holds: a step that needs more cannot run on this adapter.
+    pub(super) fn most_intersections(&self) -> u32 {
+        self.renderer.max_intersections(self.ctx)
+    }
+
+    /// Room set to `capacity`, held within a binding.
+    pub(super) fn set_room(&mut self, capacity: u32) {
+        self.capacity = capacity.min(self.most_intersections());
+    }
+
     /// A step needed `needed` intersections: grow the room before later steps run out.
     pub(super) fn note_intersections(&mut self, needed: u32) {
         if f64::from(needed) > GROW_AT * f64::from(self.capacity) {
-            self.capacity = self.capacity.max(with_headroom(needed));
+            self.set_room(self.capacity.max(with_headroom(needed)));
         }
     }
 
@@ -55,7 +65,7 @@ impl Trainer<'_> {
         let ratio = f64::from(self.num_gaussians()) / f64::from(before.max(1));
         if ratio > 1.0 {
             let grown = (f64::from(self.capacity) * ratio).ceil();
-            self.capacity = grown.min(f64::from(u32::MAX)) as u32;
+            self.set_room(grown.min(f64::from(u32::MAX)) as u32);
         }
     }
 }

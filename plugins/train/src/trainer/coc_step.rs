@@ -31,7 +31,8 @@ impl<'c> Trainer<'c> {
                 coc.init_focus(ctx, &means, &cameras);
                 // From now on a step renders M + 1 copies of every Gaussian: the intersection
                 // counts that come back would say so only after a few overflowed steps.
-                self.capacity = self.capacity.saturating_mul(coc.sets());
+                let room = self.capacity.saturating_mul(coc.sets());
+                self.set_room(room);
             }
         }
         let coc = self.coc.as_mut().ok_or(TrainError::Poisoned)?;
