@@ -45,7 +45,17 @@ pub fn bytes_per_gaussian(sh_degree: u32) -> u64 {
 /// Refuses `gaussians` whose widest buffer would exceed a buffer binding of `limit` bytes,
 /// which wgpu would otherwise report as a validation panic when the buffer is bound.
 pub fn check_fits(limit: u64, gaussians: u64, sh_degree: u32) -> Result<(), EngineError> {
-    let per = bytes_per_gaussian(sh_degree);
+    check_fits_at(limit, gaussians, bytes_per_gaussian(sh_degree), sh_degree)
+}
+
+/// [`check_fits`] for a caller whose widest buffer holds `per` bytes a Gaussian (a trainer
+/// binding several rows per Gaussian).
+pub fn check_fits_at(
+    limit: u64,
+    gaussians: u64,
+    per: u64,
+    sh_degree: u32,
+) -> Result<(), EngineError> {
     if gaussians * per <= limit {
         return Ok(());
     }

@@ -6,7 +6,9 @@ mod frame;
 mod renderer;
 mod state;
 
-pub use batch::{Batch, Crop, ImageSpec, ParamBuffers};
+pub use batch::{
+    Batch, Crop, ImageSpec, ParamBuffers, bytes_per_gaussian, check_fits, check_fits_at,
+};
 pub use frame::Frame;
 pub use renderer::{QUAT_TO_ROT_WGSL, Renderer};
 pub use state::{ForwardState, Gradients, RenderedImage};

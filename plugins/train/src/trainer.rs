@@ -639,14 +639,14 @@ impl<'c> Trainer<'c> {
             let word = |i: usize| words.get(i).copied().unwrap_or(0);
             let (overflowed, needed) = (word(0) != 0, word(1));
             self.note_intersections(needed);
-            let most = self.most_intersections();
-            if overflowed && needed > most {
-                // Retrying would overflow forever.
-                return Err(
-                    cocog_engine::EngineError::TooManyIntersections { needed, most }.into(),
-                );
-            }
             if overflowed {
+                let most = self.most_intersections();
+                if needed > most {
+                    // Retrying would overflow forever.
+                    return Err(
+                        cocog_engine::EngineError::TooManyIntersections { needed, most }.into(),
+                    );
+                }
                 self.redo.push_back(step.view);
                 continue;
             }

@@ -371,6 +371,27 @@ fn gpu_densification_makes_the_cpu_rules_decisions() {
     }
 }
 
+/// `iterations` at SH 0 from seed 4, densifying every `[from, until, interval]` at a quarter
+/// of INRIA's gradient threshold (most of the sparse start clones or splits), with opacity
+/// resets every `reset` (0: none).
+fn eager(iterations: u32, [from, until, interval]: [u32; 3], reset: u32) -> TrainConfig {
+    TrainConfig {
+        iterations,
+        max_sh_degree: 0,
+        seed: 4,
+        loss_every: 0,
+        densify: Some(DensifyConfig {
+            from_iter: from,
+            until_iter: until,
+            interval,
+            opacity_reset_interval: reset,
+            grad_threshold: 5e-5,
+            ..DensifyConfig::default()
+        }),
+        ..TrainConfig::default()
+    }
+}
+
 /// The trainer's CPU fallback (sets whose doubled rows would not fit a binding: read back,
 /// `plan_densify`, upload, moments regathered) against the GPU path from the same start: the
 /// same rule on the same statistics, so the same counts up to the float atomics' summation
@@ -381,22 +402,7 @@ fn the_cpu_densification_fallback_trains_like_the_gpu_path() {
     let mut rng = SplitMix64::new(8);
     let s = scene(ctx, &mut rng);
     let init = noisy_init(&s.truth, 2, &mut rng);
-    let config = TrainConfig {
-        iterations: 160,
-        max_sh_degree: 0,
-        seed: 4,
-        loss_every: 0,
-        densify: Some(DensifyConfig {
-            from_iter: 20,
-            until_iter: 150,
-            interval: 25,
-            opacity_reset_interval: 0,
-            // A quarter of INRIA's threshold: most of the sparse start clones or splits.
-            grad_threshold: 5e-5,
-            ..DensifyConfig::default()
-        }),
-        ..TrainConfig::default()
-    };
+    let config = eager(160, [20, 150, 25], 0);
     let run = |cpu: bool| {
         let mut trainer = Trainer::new(ctx, &init, &s.train, config.clone()).unwrap();
         trainer.force_cpu_densification(cpu);
@@ -448,21 +454,7 @@ fn the_last_iteration_neither_densifies_nor_resets_opacities() {
     let s = scene(ctx, &mut rng);
     let init = noisy_init(&s.truth, 2, &mut rng);
     let run = |iterations: u32| {
-        let config = TrainConfig {
-            iterations,
-            max_sh_degree: 0,
-            seed: 4,
-            loss_every: 0,
-            densify: Some(DensifyConfig {
-                from_iter: 10,
-                until_iter: 200,
-                interval: 20,
-                opacity_reset_interval: 40,
-                grad_threshold: 5e-5,
-                ..DensifyConfig::default()
-            }),
-            ..TrainConfig::default()
-        };
+        let config = eager(iterations, [10, 200, 20], 40);
         let mut trainer = Trainer::new(ctx, &init, &s.train, config).unwrap();
         for _ in 1..40 {
             trainer.step().unwrap();
@@ -497,21 +489,7 @@ fn density_control_stops_growing_at_the_cap() {
     let mut rng = SplitMix64::new(8);
     let s = scene(ctx, &mut rng);
     let init = noisy_init(&s.truth, 2, &mut rng);
-    let config = TrainConfig {
-        iterations: 120,
-        max_sh_degree: 0,
-        seed: 4,
-        loss_every: 0,
-        densify: Some(DensifyConfig {
-            from_iter: 10,
-            until_iter: 110,
-            interval: 20,
-            opacity_reset_interval: 0,
-            grad_threshold: 5e-5,
-            ..DensifyConfig::default()
-        }),
-        ..TrainConfig::default()
-    };
+    let config = eager(120, [10, 110, 20], 0);
     let run = |cap: Option<u32>| {
         let mut trainer = Trainer::new(ctx, &init, &s.train, config.clone()).unwrap();
         if let Some(c) = cap {

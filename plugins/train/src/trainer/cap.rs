@@ -2,7 +2,7 @@
 //! binding. A run is refused up front past it, and density control stops growing the set at
 //! it (with a warning) instead of failing in a wgpu panic thousands of steps in.
 
-use cocog_engine::{EngineError, sh_coeffs_per_channel};
+use cocog_engine::EngineError;
 
 use crate::TrainConfig;
 
@@ -11,7 +11,7 @@ use crate::TrainConfig;
 /// (their projections and SH gradients keep a row per set), and at least h_θ's 64-float
 /// hidden rows.
 pub(super) fn bytes_per_gaussian(config: &TrainConfig) -> u64 {
-    let per_set = (12 * sh_coeffs_per_channel(config.max_sh_degree) as u64).max(48);
+    let per_set = cocog_engine::bytes_per_gaussian(config.max_sh_degree);
     match &config.coc {
         None => per_set,
         Some(c) => (per_set * u64::from(c.net.copies + 1)).max(256),
@@ -26,17 +26,7 @@ pub(super) fn most_gaussians(config: &TrainConfig, limit: u64) -> u32 {
 /// `Err` when `n` starting Gaussians are past `most_gaussians`.
 pub(super) fn check(n: u32, config: &TrainConfig, limit: u64) -> Result<(), EngineError> {
     let per = bytes_per_gaussian(config);
-    if u64::from(n) * per <= limit {
-        return Ok(());
-    }
-    let mib = |b: u64| b as f64 / f64::from(1u32 << 20);
-    Err(EngineError::TooManyGaussians {
-        gaussians: u64::from(n),
-        sh_degree: config.max_sh_degree,
-        most: limit / per,
-        needed_mib: mib(u64::from(n) * per),
-        limit_mib: mib(limit),
-    })
+    cocog_engine::check_fits_at(limit, u64::from(n), per, config.max_sh_degree)
 }
 
 #[cfg(test)]
