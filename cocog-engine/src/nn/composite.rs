@@ -26,7 +26,9 @@ struct ConvU {
     w_off: u32,
     bias_off: u32,
     rgba_input: u32,
-    pad: [u32; 3],
+    per_part: u32,
+    parts: u32,
+    pad: u32,
 }
 
 #[repr(C)]
@@ -78,7 +80,8 @@ pub struct Compositor {
     /// The one-channel head's forward and weight gradient, direct: a 64-row GEMM tile would
     /// compute 63 rows for nothing.
     conv: Kernel,
-    conv_weights: Kernel,
+    conv_weight_parts: Kernel,
+    conv_weight_sum: Kernel,
     norm_stats: Kernel,
     norm_apply: Kernel,
     norm_grad_stats: Kernel,
@@ -96,7 +99,8 @@ impl Compositor {
             config,
             gemm: ConvGemm::new(ctx, config.channels),
             conv: Kernel::new(ctx, &conv, "conv_forward"),
-            conv_weights: Kernel::new(ctx, &conv, "conv_weight_grad"),
+            conv_weight_parts: Kernel::new(ctx, &conv, "conv_weight_grad_part"),
+            conv_weight_sum: Kernel::new(ctx, &conv, "conv_weight_grad_sum"),
             norm_stats: Kernel::new(ctx, &norm, "norm_stats"),
             norm_apply: Kernel::new(ctx, &norm, "norm_apply"),
             norm_grad_stats: Kernel::new(ctx, &norm, "norm_grad_stats"),
@@ -135,6 +139,7 @@ impl Compositor {
         rgba: bool,
     ) -> crate::core::UniformSlot {
         let (cin, cout, k, w_off, bias_off) = layer;
+        let (per_part, parts) = weight_grad_split(images * w * h);
         rec.uniform(&ConvU {
             images,
             cin,
@@ -145,7 +150,9 @@ impl Compositor {
             w_off,
             bias_off,
             rgba_input: u32::from(rgba),
-            pad: [0; 3],
+            per_part,
+            parts,
+            pad: 0,
         })
     }
 
@@ -320,7 +327,9 @@ impl Compositor {
             };
             let g = &self.gemm;
             // head: weights, then the gradient of its input y2.
-            self.weight_grads(rec, head, &l2.1, &v_logits, &v_params, w, h, images, false);
+            self.weight_grads(
+                rec, ws, head, &l2.1, &v_logits, &v_params, w, h, images, false,
+            );
             g.input_grad(rec, ws, head, size, params, &v_logits, &v_y);
             self.relu_norm_backward(rec, l2, &v_y, &v_z, &grad_stats, images * c, w * h);
             g.weight_grad(rec, ws, c2, size, &l1.1, &v_z, &v_params, false);
@@ -334,10 +343,12 @@ impl Compositor {
         }
     }
 
-    /// The head's weight gradient, one thread per weight.
+    /// The head's weight gradient: partial sums over ranges of pixels, then one fixed-order
+    /// sum per weight (conv.wgsl).
     fn weight_grads(
         &self,
         rec: &mut Recorder,
+        ws: &mut Workspace,
         layer: ConvLayer,
         input: &wgpu::Buffer,
         v_out: &wgpu::Buffer,
@@ -350,11 +361,19 @@ impl Compositor {
         let u = Self::conv_uniform(rec, layer, w, h, images, rgba);
         let (cin, cout, k, _, bias) = layer;
         let count = cout * cin * k * k + if bias == NO_BIAS { 0 } else { cout };
-        self.conv_weights.dispatch_1d(
-            rec,
-            &[(0, &u), (2, input), (4, v_out), (6, v_params)],
-            count.div_ceil(256),
+        let (_, parts) = weight_grad_split(images * w * h);
+        let partials = ws.buffer(
+            rec.ctx(),
+            "compositor head partials",
+            u64::from(parts) * u64::from(count) * 4,
         );
+        self.conv_weight_parts.dispatch(
+            rec,
+            &[(0, &u), (2, input), (4, v_out), (7, &partials)],
+            [count.div_ceil(64), parts, 1],
+        );
+        self.conv_weight_sum
+            .dispatch_1d(rec, &[(0, &u), (6, v_params), (7, &partials)], count);
     }
 
     fn relu_norm_backward(
@@ -387,4 +406,14 @@ impl Compositor {
             (planes * size).div_ceil(256),
         );
     }
+}
+
+/// The head's weight-gradient split of `positions` (image, pixel) pairs: positions per range
+/// and ranges. Ranges of at least `MIN_PART` positions amortise a thread's start; at most
+/// `MAX_PARTS` of them keep the per-weight sums short.
+fn weight_grad_split(positions: u32) -> (u32, u32) {
+    const MIN_PART: u32 = 256;
+    const MAX_PARTS: u32 = 1024;
+    let per_part = positions.div_ceil(MAX_PARTS).max(MIN_PART);
+    (per_part, positions.div_ceil(per_part).max(1))
 }

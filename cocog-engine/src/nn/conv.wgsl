@@ -1,7 +1,10 @@
-// Zero-padded stride-1 convolutions, one thread per output value: the forward and the weight
-// and bias gradients (each weight sums over every pixel of every image, in a fixed order).
-// F's one-channel head runs here; its wider layers run as implicit GEMMs (conv_gemm.rs). Maps are [image][channel][y][x]; the first layer
-// reads the renders' rgba [image][y][x][4] directly.
+// Zero-padded stride-1 convolutions for F's one-channel head (its wider layers run as implicit
+// GEMMs, conv_gemm.rs): the forward, one thread per output value, and the weight and bias
+// gradients, each a sum over every pixel of every image. That sum is split into ranges of
+// pixels, one thread per (weight, range), then each weight's partial sums are added by one
+// workgroup in a fixed order: a thread per weight walking all pixels would leave a GPU with a
+// few hundred threads, each a long chain of dependent loads. Maps are [image][channel][y][x];
+// the first layer reads the renders' rgba [image][y][x][4] directly.
 
 struct Conv {
     images: u32,
@@ -15,9 +18,10 @@ struct Conv {
     bias_off: u32,
     // 1 when the input is the renders' rgba layout.
     rgba_input: u32,
-    pad0: u32,
-    pad1: u32,
-    pad2: u32,
+    // The weight gradient's split: (image, pixel) positions per range, and ranges.
+    per_part: u32,
+    parts: u32,
+    pad: u32,
 }
 
 @group(0) @binding(0) var<uniform> cv: Conv;
@@ -26,6 +30,8 @@ struct Conv {
 @group(0) @binding(3) var<storage, read_write> output: array<f32>;
 @group(0) @binding(4) var<storage, read> v_out: array<f32>;
 @group(0) @binding(6) var<storage, read_write> v_params: array<f32>;
+// [range][weight, then bias].
+@group(0) @binding(7) var<storage, read_write> partials: array<f32>;
 
 const NO_BIAS: u32 = 0xffffffffu;
 
@@ -72,44 +78,88 @@ fn conv_forward(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) n
     output[t] = s;
 }
 
-// One thread per weight (then one per bias): Σ over images and pixels.
-@compute @workgroup_size(256)
-fn conv_weight_grad(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
-    let t = index(wg, nwg, lid);
-    let kk = cv.k * cv.k;
-    let weights = cv.cout * cv.cin * kk;
+fn weight_count() -> u32 {
     var biases = 0u;
     if cv.bias_off != NO_BIAS {
         biases = cv.cout;
     }
-    if t >= weights + biases {
+    return cv.cout * cv.cin * cv.k * cv.k + biases;
+}
+
+// Thread x: weight (then bias) t, over the positions of range wg.y.
+@compute @workgroup_size(64)
+fn conv_weight_grad_part(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let t = wg.x * 64u + lid;
+    let count = weight_count();
+    if t >= count {
         return;
     }
-    let pad = i32(cv.k / 2u);
-    var s = 0.0;
-    if t >= weights {
-        let co = t - weights;
-        for (var i = 0u; i < cv.images; i++) {
-            let base = (i * cv.cout + co) * cv.height * cv.width;
-            for (var p = 0u; p < cv.height * cv.width; p++) {
-                s += v_out[base + p];
-            }
-        }
-        v_params[cv.bias_off + co] = s;
-        return;
+    let hw = cv.height * cv.width;
+    let begin = wg.y * cv.per_part;
+    let end = min(begin + cv.per_part, cv.images * hw);
+    let kk = cv.k * cv.k;
+    let weights = cv.cout * cv.cin * kk;
+    let bias = t >= weights;
+    var co = t / (kk * cv.cin);
+    if bias {
+        co = t - weights;
     }
-    let kx = i32(t % cv.k);
-    let ky = i32((t / cv.k) % cv.k);
     let ci = (t / kk) % cv.cin;
-    let co = t / (kk * cv.cin);
-    for (var i = 0u; i < cv.images; i++) {
-        let base = (i * cv.cout + co) * cv.height * cv.width;
-        for (var y = 0u; y < cv.height; y++) {
-            for (var x = 0u; x < cv.width; x++) {
-                let v = read_input(i, ci, i32(y) + ky - pad, i32(x) + kx - pad);
-                s += v_out[base + y * cv.width + x] * v;
+    let pad = i32(cv.k / 2u);
+    let ky = i32((t / cv.k) % cv.k) - pad;
+    let kx = i32(t % cv.k) - pad;
+    // The position's image and pixel, advanced without a division per step.
+    var i = begin / hw;
+    var p = begin % hw;
+    var y = p / cv.width;
+    var x = p % cv.width;
+    var s = 0.0;
+    for (var q = begin; q < end; q++) {
+        var v = 1.0;
+        if !bias {
+            v = read_input(i, ci, i32(y) + ky, i32(x) + kx);
+        }
+        s += v_out[(i * cv.cout + co) * hw + y * cv.width + x] * v;
+        x += 1u;
+        if x == cv.width {
+            x = 0u;
+            y += 1u;
+            if y == cv.height {
+                y = 0u;
+                i += 1u;
             }
         }
     }
-    v_params[cv.w_off + t] = s;
+    partials[wg.y * count + t] = s;
+}
+
+var<workgroup> sums: array<f32, 256>;
+
+// One workgroup per weight: its ranges' partial sums, added in a fixed order.
+@compute @workgroup_size(256)
+fn conv_weight_grad_sum(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let t = wg.y * nwg.x + wg.x;
+    let count = weight_count();
+    if t >= count {
+        return;
+    }
+    var s = 0.0;
+    for (var r = lid; r < cv.parts; r += 256u) {
+        s += partials[r * count + t];
+    }
+    sums[lid] = s;
+    for (var w = 128u; w > 0u; w >>= 1u) {
+        workgroupBarrier();
+        if lid < w {
+            sums[lid] += sums[lid + w];
+        }
+    }
+    if lid == 0u {
+        let weights = cv.cout * cv.cin * cv.k * cv.k;
+        if t >= weights {
+            v_params[cv.bias_off + t - weights] = sums[0];
+        } else {
+            v_params[cv.w_off + t] = sums[0];
+        }
+    }
 }
