@@ -259,3 +259,9 @@ fn gpu_learned_mode_at_full_width_matches_the_reference() {
 fn gpu_uniform_mode_is_the_mean() {
     gpu_case(CompositeMode::Uniform, 8, 5, 6, 5, 7);
 }
+
+/// More channels than one 64-row tile of the convolutions' matrix products.
+#[test]
+fn gpu_learned_mode_past_one_channel_block_matches_the_reference() {
+    gpu_case(CompositeMode::Learned, 72, 2, 9, 8, 8);
+}
