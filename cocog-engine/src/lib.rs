@@ -55,7 +55,7 @@ pub use crate::core::{
 pub use error::EngineError;
 pub use prims::{
     Adam, AdamConfig, AdamMoments, Gemm, GemmLayout, GemmShape, GemmTile, ImageLoss, LossOutput,
-    LossValue, PrefixSum, RadixSort, SortBuffers, SortCount,
+    LossRows, LossValue, PrefixSum, RadixSort, SortBuffers, SortCount,
 };
 pub use splat::{
     Batch, Crop, ForwardState, Frame, Gradients, ImageSpec, ParamBuffers, RenderedImage, Renderer,

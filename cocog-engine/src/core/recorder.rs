@@ -33,6 +33,13 @@ impl Bind for wgpu::Buffer {
     }
 }
 
+/// A range of a buffer (e.g. a band of rows of a frame that is larger than one binding).
+impl Bind for wgpu::BufferBinding<'_> {
+    fn binding(&self) -> wgpu::BufferBinding<'_> {
+        self.clone()
+    }
+}
+
 impl Bind for super::GpuBuffer {
     fn binding(&self) -> wgpu::BufferBinding<'_> {
         self.buffer.as_entire_buffer_binding()

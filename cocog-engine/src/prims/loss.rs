@@ -1,7 +1,7 @@
 //! GPU training loss (1 − λ)·L1 + λ·(1 − SSIM) and its gradient; see loss.wgsl.
 
 use crate::EngineError;
-use crate::core::{GpuBuffer, GpuContext, Kernel, Recorder, Workspace, shader};
+use crate::core::{Bind, GpuBuffer, GpuContext, Kernel, Recorder, Workspace, shader};
 use crate::reference::loss::window;
 
 #[repr(C)]
@@ -47,6 +47,14 @@ struct Band {
     pixel0: u32,
 }
 
+/// Which rows of an image `ImageLoss::compute_rows` scores, and the pixel count of the whole
+/// loss they are part of.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LossRows {
+    pub out: (u32, u32),
+    pub frame_pixels: u64,
+}
+
 /// Workgroups a 1D dispatch of `groups` launches (a 2D grid past the x limit).
 fn launched(groups: u32) -> u32 {
     let x = groups.clamp(1, MAX_GRID_X);
@@ -76,6 +84,16 @@ pub struct LossValue {
 }
 
 impl LossOutput {
+    /// The same loss read from other partial sums: those of every band of a frame, gathered
+    /// into one buffer (`ImageLoss::compute_rows` scales each band's as a part of the frame's).
+    pub fn with_partials(&self, partials: GpuBuffer, num_groups: usize) -> LossOutput {
+        LossOutput {
+            partials,
+            num_groups,
+            ..self.clone()
+        }
+    }
+
     /// Bytes of `partials` to read back (asynchronously or not) for `value_from`.
     pub fn partials_bytes(&self) -> u64 {
         self.num_groups as u64 * 16
@@ -120,15 +138,54 @@ impl ImageLoss {
         self
     }
 
+    /// The partial sums `compute_rows` writes for these arguments (its output's
+    /// `num_groups`), so a caller can gather several calls' sums in one buffer.
+    pub fn slots(
+        &self,
+        ctx: &GpuContext,
+        width: u32,
+        height: u32,
+        num_images: u32,
+        rows: LossRows,
+    ) -> u32 {
+        Self::slots_of(&self.plan(ctx, width, height, num_images, rows.out), width)
+    }
+
+    fn slots_of(bands: &[Band], width: u32) -> u32 {
+        bands
+            .iter()
+            .map(|b| launched((width * b.rows * b.num_images).div_ceil(256)))
+            .sum()
+    }
+
+    fn plan(
+        &self,
+        ctx: &GpuContext,
+        width: u32,
+        height: u32,
+        num_images: u32,
+        out: (u32, u32),
+    ) -> Vec<Band> {
+        let limit = self.binding_limit.unwrap_or_else(|| ctx.binding_limit());
+        self.bands(limit, width, height, num_images, out)
+    }
+
     /// The passes for `num_images` images of `width`×`height`: one over everything when its
     /// scratch fits a binding, else bands of rows per image, each with its halo.
-    fn bands(&self, limit: u64, width: u32, height: u32, num_images: u32) -> Vec<Band> {
+    fn bands(
+        &self,
+        limit: u64,
+        width: u32,
+        height: u32,
+        num_images: u32,
+        out: (u32, u32),
+    ) -> Vec<Band> {
         let pixels = u64::from(width) * u64::from(height) * u64::from(num_images);
         if Self::largest_binding(pixels) <= limit {
             return vec![Band {
                 row0: 0,
                 rows: height,
-                out: (0, height as i32),
+                out: (out.0 as i32, out.1 as i32),
                 num_images,
                 pixel0: 0,
             }];
@@ -137,10 +194,10 @@ impl ImageLoss {
         let band = (rows_fit.saturating_sub(u64::from(2 * HALO)) as u32).clamp(1, height);
         (0..num_images)
             .flat_map(|image| {
-                (0..height).step_by(band as usize).map(move |y0| Band {
+                (out.0..out.1).step_by(band as usize).map(move |y0| Band {
                     row0: y0 as i32 - HALO as i32,
                     rows: band + 2 * HALO,
-                    out: (y0 as i32, (y0 + band).min(height) as i32),
+                    out: (y0 as i32, (y0 + band).min(out.1) as i32),
                     num_images: 1,
                     pixel0: image * width * height,
                 })
@@ -167,31 +224,58 @@ impl ImageLoss {
         &self,
         rec: &mut Recorder,
         ws: &mut Workspace,
-        pred: &wgpu::Buffer,
-        target: &wgpu::Buffer,
+        pred: &dyn Bind,
+        target: &dyn Bind,
         width: u32,
         height: u32,
         num_images: u32,
         lambda: f32,
     ) -> LossOutput {
+        let rows = LossRows {
+            out: (0, height),
+            frame_pixels: u64::from(width) * u64::from(height) * u64::from(num_images),
+        };
+        self.compute_rows(
+            rec, ws, pred, target, width, height, num_images, rows, lambda,
+        )
+    }
+
+    /// One band of a frame too large for a buffer binding: `pred` and `target` hold rows
+    /// of one image (the band and its halo), of which `rows.out` are scored, with the sums
+    /// scaled as parts of a loss over `rows.frame_pixels` pixels. The gradient is zero
+    /// outside `rows.out`; that of a scored row is exact when the band holds 10 rows beyond
+    /// it on each side (or the frame ends there), so the bands of a frame add up to its loss
+    /// and gradient.
+    pub fn compute_rows(
+        &self,
+        rec: &mut Recorder,
+        ws: &mut Workspace,
+        pred: &dyn Bind,
+        target: &dyn Bind,
+        width: u32,
+        height: u32,
+        num_images: u32,
+        rows: LossRows,
+        lambda: f32,
+    ) -> LossOutput {
         let ctx = rec.ctx();
         let pixels = width * height * num_images;
         let taps = window();
-        let inv_n = 1.0 / (3.0 * f64::from(pixels));
-        let limit = self.binding_limit.unwrap_or_else(|| ctx.binding_limit());
-        let bands = self.bands(limit, width, height, num_images);
+        let inv_n = 1.0 / (3.0 * rows.frame_pixels as f64);
+        let bands = self.plan(ctx, width, height, num_images, rows.out);
         let scratch_px = |b: &Band| width * b.rows * b.num_images;
         let largest = bands.iter().map(scratch_px).max().unwrap_or(0);
-        let slots: u32 = bands
-            .iter()
-            .map(|b| launched(scratch_px(b).div_ceil(256)))
-            .sum();
+        let slots = Self::slots_of(&bands, width);
         let px = u64::from(largest) * 16;
         // The SSIM terms reuse the moments' scratch once the moments are consumed.
         let tmp = ws.buffer(ctx, "ssim tmp", 5 * px);
         let moments = ws.buffer(ctx, "ssim moments", 5 * px);
         let partials = ws.buffer(ctx, "loss partials", u64::from(slots) * 16);
-        let v_pred = ws.buffer(ctx, "v_pred", u64::from(pixels) * 16);
+        let v_pred = if rows.out == (0, height) {
+            ws.buffer(ctx, "v_pred", u64::from(pixels) * 16)
+        } else {
+            ws.zeroed(rec, "v_pred", u64::from(pixels) * 16)
+        };
         let terms = ws.buffer(ctx, "ssim terms", 3 * px);
         let mut partial0 = 0;
         for band in &bands {

@@ -9,6 +9,6 @@ mod sort;
 
 pub use adam::{Adam, AdamConfig, AdamMoments};
 pub use gemm::{Gemm, GemmLayout, GemmShape, GemmTile};
-pub use loss::{ImageLoss, LossOutput, LossValue};
+pub use loss::{ImageLoss, LossOutput, LossRows, LossValue};
 pub use scan::PrefixSum;
 pub use sort::{RadixSort, SortBuffers, SortCount};

@@ -1,6 +1,8 @@
 //! Densification statistics accumulated on the GPU every iteration; see stats.wgsl.
 
-use cocog_engine::{ForwardState, GpuBuffer, GpuContext, Gradients, Kernel, Recorder, shader};
+use cocog_engine::{
+    Bind, ForwardState, GpuBuffer, GpuContext, Gradients, Kernel, Recorder, shader,
+};
 
 use crate::TrainError;
 
@@ -131,6 +133,21 @@ impl GradStats {
         height: u32,
         sets: u32,
     ) {
+        let pass: (&dyn Bind, &dyn Bind, &dyn Bind) =
+            (&state.projected, &grads.v_projected, &state.status);
+        self.accumulate_from(rec, pass, width, height, sets);
+    }
+
+    /// The same from a pass's (projected records, their gradients, status) buffers, laid out
+    /// as the renderer's: e.g. a frame's gathered from its bands.
+    pub fn accumulate_from(
+        &self,
+        rec: &mut Recorder,
+        (projected, v_projected, status): (&dyn Bind, &dyn Bind, &dyn Bind),
+        width: u32,
+        height: u32,
+        sets: u32,
+    ) {
         let uniform = rec.uniform(&Params {
             n: self.len,
             half_width: 0.5 * width as f32,
@@ -141,11 +158,11 @@ impl GradStats {
             rec,
             &[
                 (0, &uniform),
-                (1, &state.projected),
-                (2, &grads.v_projected),
+                (1, projected),
+                (2, v_projected),
                 (3, &self.accum),
                 (4, &self.denom),
-                (5, &state.status),
+                (5, status),
             ],
             self.len.div_ceil(256),
         );

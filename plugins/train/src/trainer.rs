@@ -12,6 +12,7 @@ use crate::{
     DensifyConfig, GradStats, SplitMix64, TrainConfig, TrainError, ViewOrder, scene_extent,
 };
 
+mod bands;
 mod binding;
 mod cap;
 mod capacity;
@@ -238,6 +239,8 @@ pub struct Trainer<'c> {
     /// Densification statistics.
     stats: GradStats,
     densify: crate::GpuDensify,
+    /// Gathers a banded step's bands (`bands.rs`).
+    bands_kernels: bands::BandKernels,
     /// CoCoGaussian's h_θ, F and focus distances, when `config.coc` asks for them.
     coc: Option<coc::CocState>,
     rng: SplitMix64,
@@ -288,8 +291,14 @@ impl<'c> Trainer<'c> {
         state: Resumed,
     ) -> Result<Self, TrainError> {
         let (w, h) = (views[0].camera.width, views[0].camera.height);
-        binding::check(w, h, &config, ctx.binding_limit(), &ctx.adapter_name())
-            .map_err(TrainError::Invalid)?;
+        // A plain 3DGS step trains a frame past one binding in bands; a CoC step cannot (F's
+        // instance norms see whole frames).
+        if config.coc.is_some() {
+            binding::check(w, h, &config, ctx.binding_limit(), &ctx.adapter_name())
+        } else {
+            bands::plan(w, h, ctx.binding_limit()).map(|_| ())
+        }
+        .map_err(TrainError::Invalid)?;
         cap::check(state.params.num_gaussians, &config, ctx.binding_limit())?;
         let most = cap::most_gaussians(&config, ctx.binding_limit());
         let cameras: Vec<Camera> = views.iter().map(|v| v.camera).collect();
@@ -325,6 +334,7 @@ impl<'c> Trainer<'c> {
             opacity_reset: density::opacity_reset_kernel(ctx),
             widen_sh: sh_growth::widen_kernel(ctx),
             densify: crate::GpuDensify::new(ctx),
+            bands_kernels: bands::BandKernels::new(ctx),
             targets,
             moments: state.moments,
             stats: state.stats,
@@ -558,8 +568,14 @@ impl<'c> Trainer<'c> {
             .aim(&mut batch, self.cameras[view], background)
             .and_then(|()| {
                 let mut rec = self.ctx.recorder();
+                let camera = self.cameras[view];
+                let limit = self.renderer.binding_limit(self.ctx);
                 if self.config.coc.as_ref().is_some_and(|c| c.blurs_at(it)) {
                     self.optimise_coc(&mut rec, &batch, view, it, plan, background, &mut watch)?;
+                } else if let Some(bands) =
+                    bands::plan(camera.width, camera.height, limit).map_err(TrainError::Invalid)?
+                {
+                    self.optimise_banded(&mut rec, &mut batch, view, it, plan, &bands, &mut watch)?;
                 } else {
                     self.optimise(&mut rec, &batch, view, it, plan, &mut watch)?;
                 }
@@ -675,20 +691,20 @@ impl<'c> Trainer<'c> {
         std::array::from_fn(|_| rng.next_f64() as f32)
     }
 
-    /// Renders the current Gaussians from `camera` over the configured background.
+    /// Renders the current Gaussians from `camera` over the configured background, in bands
+    /// of rows where the frame outgrows a buffer binding.
     pub fn render(&mut self, camera: &Camera) -> Result<RenderedImage, TrainError> {
         let mut batch = self.batch.take().ok_or(TrainError::Poisoned)?;
-        let result = self
-            .aim(&mut batch, *camera, self.config.background)
-            .and_then(|()| {
-                let state = self.renderer.forward(self.ctx, &batch)?;
-                Ok(state.read_images(self.ctx, &batch)?)
-            });
+        let spec = ImageSpec {
+            camera: *camera,
+            background: self.config.background,
+            first: 0,
+            count: batch.params.num_gaussians,
+            crop: None,
+        };
+        let result = self.renderer.render_frame(self.ctx, &mut batch, spec);
         self.batch = Some(batch);
-        let mut images = result?;
-        images
-            .pop()
-            .ok_or_else(|| TrainError::Invalid("renderer returned no image".into()))
+        Ok(result?.image)
     }
 
     /// Reads the current Gaussians back to the CPU (one sync per parameter buffer).

@@ -1,7 +1,9 @@
-//! The up-front check that a run's per-pixel GPU buffers each fit one buffer binding, so a
-//! photo too large for the adapter is refused by name before any GPU work instead of failing
+//! The up-front check that a cocog run's per-pixel GPU buffers each fit one buffer binding, so
+//! a photo too large for the adapter is refused by name before any GPU work instead of failing
 //! in a wgpu panic at the first step (or at the compositor's start, thousands of steps in).
-//! The loss works in bands of rows and needs no check.
+//! A plain 3DGS run trains such photos in bands of rows instead (`bands.rs`); a CoC step
+//! cannot, since F's instance norms see whole frames. The loss works in bands of rows and
+//! needs no check.
 
 use cocog_engine::nn::CompositorConfig;
 

@@ -2,7 +2,9 @@
 //! many it needs: the count comes back a few steps late, room grows ahead of it, and a step
 //! that still overflowed was skipped on the GPU and its view is trained again.
 
-use super::Trainer;
+use cocog_engine::{Batch, ImageSpec};
+
+use super::{Trainer, bands};
 use crate::TrainError;
 
 /// Room kept above the largest count seen.
@@ -11,35 +13,44 @@ const HEADROOM: f64 = 1.5;
 const GROW_AT: f64 = 0.8;
 
 impl Trainer<'_> {
-    /// Room for the most intersections any training view needs now, with headroom: one
-    /// blocking count per view, at start-up only.
+    /// Room for the most intersections any training view (or band of one, `bands.rs`)
+    /// needs now, with headroom: one blocking count per view and band, at start-up only.
     pub(super) fn measure_capacity(&mut self) -> Result<u32, TrainError> {
-        let ctx = self.ctx;
         let mut batch = self.batch.take().ok_or(TrainError::Poisoned)?;
+        let result = self.most_needed(&mut batch);
+        self.batch = Some(batch);
+        Ok(with_headroom(result?))
+    }
+
+    fn most_needed(&mut self, batch: &mut Batch) -> Result<u32, TrainError> {
+        let ctx = self.ctx;
+        let limit = self.renderer.binding_limit(ctx);
         let mut most = 0u32;
-        let mut result = Ok(());
         for camera in self.cameras.clone() {
-            result = self.aim(&mut batch, camera, self.config.background);
-            if result.is_err() {
-                break;
+            self.aim(batch, camera, self.config.background)?;
+            let frame = batch.images[0];
+            let bands = bands::plan(camera.width, camera.height, limit)
+                .map_err(TrainError::Invalid)?
+                .unwrap_or_default();
+            let mut specs: Vec<ImageSpec> = bands
+                .iter()
+                .map(|b| frame.rows(b.rendered.0, b.rendered.1 - b.rendered.0))
+                .collect();
+            if specs.is_empty() {
+                specs.push(frame);
             }
-            let mut rec = ctx.recorder();
-            // Room for none: only the count in `status` is wanted.
-            let state = self
-                .renderer
-                .encode_forward(&mut rec, &mut self.ws, &batch, 0);
-            rec.submit();
-            match ctx.read::<u32>(&state.status, 2) {
-                Ok(words) => most = most.max(words[1]),
-                Err(e) => {
-                    result = Err(e.into());
-                    break;
-                }
+            for spec in specs {
+                batch.set_images(ctx, vec![spec])?;
+                let mut rec = ctx.recorder();
+                // Room for none: only the count in `status` is wanted.
+                let state = self
+                    .renderer
+                    .encode_forward(&mut rec, &mut self.ws, batch, 0);
+                rec.submit();
+                most = most.max(ctx.read::<u32>(&state.status, 2)?[1]);
             }
         }
-        self.batch = Some(batch);
-        result?;
-        Ok(with_headroom(most))
+        Ok(most)
     }
 
     /// The most room a binding holds: a step that needs more cannot run on this adapter.
