@@ -12,14 +12,15 @@ Three modes:
       wrote: the same random Gaussians and cameras, no density control, all SH bands, targets
       as cocog's bench makes them; prints and writes ms/iteration and peak GPU memory.
   check SCENE | check --workload DIR
-      loads the inputs only (numpy, plyfile, Pillow; no torch) and prints what it found.
+      loads the inputs only (numpy, Pillow; no torch) and prints what it found.
 
 The training recipe is INRIA's as gsplat drives it: Adam per group (means 1.6e-4 x scene scale
 decayed 100x over the run, scales 5e-3, quats 1e-3, opacities 5e-2, SH DC 2.5e-3, SH rest
 2.5e-3/20), loss 0.8 L1 + 0.2 (1 - SSIM, 11x11 Gaussian window), one SH band per 1000
 iterations, black background, densification every 100 from 500 to 15000, opacity reset every
 3000 (gsplat 1.5.3's own reset never fires, so it is done here unless --no-opacity-reset).
-Timing covers the training loop after one warm-up step, with the GPU synchronised at both ends.
+Timing covers the training loop after its first step (gsplat's CUDA build and warm-up), with the
+GPU synchronised at both ends; train's it/s counts the timed steps.
 Needs a CUDA GPU with torch and gsplat==1.5.3 (see ../shared/anchors/gsplat/README.md for
 installing it where nothing can be downloaded).
 """
@@ -37,19 +38,61 @@ SH_C0 = 0.28209479177387814
 
 # ---- inputs (numpy only) --------------------------------------------------------------------
 
+def downscaled_size(w, h, n):
+    """cocog's --downscale size: w / n rounded half away from zero (not Python's round())."""
+    return max(1, int(w / n + 0.5)), max(1, int(h / n + 0.5))
+
+
 def load_rgb(path, downscale):
+    """An image in [0, 1], alpha composited over black (cocog's background), area-averaged to
+    cocog's downscaled size."""
     from PIL import Image
-    img = Image.open(path).convert("RGB")
+    if not os.path.exists(path):
+        sys.exit(f"{path}: no such image (scene.json holds the paths `cocog ingest` saw: ingest "
+                 f"the dataset on this machine)")
+    img = Image.open(path).convert("RGBA")
     if downscale > 1:
-        # Area average, as cocog's --downscale: a box filter over N x N blocks.
-        w, h = img.size
-        img = img.crop((0, 0, w - w % downscale, h - h % downscale)).reduce(downscale)
-    return np.asarray(img, dtype=np.float32) / 255.0
+        img = img.resize(downscaled_size(*img.size, downscale), Image.BOX)
+    rgba = np.asarray(img, dtype=np.float32) / 255.0
+    return rgba[..., :3] * rgba[..., 3:]
+
+
+_PLY_TYPES = {"float": "<f4", "float32": "<f4", "double": "<f8", "float64": "<f8",
+              "uchar": "u1", "uint8": "u1", "char": "i1", "int8": "i1", "ushort": "<u2",
+              "uint16": "<u2", "short": "<i2", "int16": "<i2", "uint": "<u4", "uint32": "<u4",
+              "int": "<i4", "int32": "<i4"}
+
+
+def read_ply_vertices(path):
+    """The vertex element of a binary little-endian PLY (what cocog writes) as a record array:
+    numpy alone, since the GPU image has no plyfile."""
+    with open(path, "rb") as f:
+        if f.readline().strip() != b"ply":
+            sys.exit(f"{path}: not a PLY file")
+        fields, count, in_vertex = [], None, False
+        while True:
+            words = f.readline().decode("ascii").split()
+            if not words or words[0] in ("comment", "obj_info"):
+                continue
+            if words[0] == "format" and words[1] != "binary_little_endian":
+                sys.exit(f"{path}: format {words[1]}, expected binary_little_endian")
+            if words[0] == "element":
+                in_vertex = words[1] == "vertex"
+                if in_vertex:
+                    count = int(words[2])
+                elif count is None:
+                    sys.exit(f"{path}: the vertex element must come first")
+            elif words[0] == "property" and in_vertex:
+                if words[1] == "list":
+                    sys.exit(f"{path}: list property in the vertex element")
+                fields.append((words[-1], _PLY_TYPES[words[1]]))
+            elif words[0] == "end_header":
+                break
+        return np.fromfile(f, dtype=np.dtype(fields), count=count)
 
 
 def load_scene(scene_dir, downscale):
     """Views (camera, world_from_camera, image, split) and initial points of a cocog scene."""
-    from plyfile import PlyData
     with open(os.path.join(scene_dir, "scene.json")) as f:
         scene = json.load(f)
     cameras = {c["id"]: c for c in scene["cameras"]}
@@ -58,16 +101,17 @@ def load_scene(scene_dir, downscale):
         c = cameras[v["camera"]]
         path = v["image"] if os.path.isabs(v["image"]) else os.path.join(scene_dir, v["image"])
         image = load_rgb(path, downscale)
+        # Intrinsics scaled by the size ratio, as cocog scales them.
+        sx, sy = image.shape[1] / c["width"], image.shape[0] / c["height"]
         views.append(dict(
             name=v["name"], split=v["split"], image=image,
-            K=np.array([[c["fx"] / downscale, 0, c["cx"] / downscale],
-                        [0, c["fy"] / downscale, c["cy"] / downscale], [0, 0, 1]], np.float32),
+            K=np.array([[c["fx"] * sx, 0, c["cx"] * sx],
+                        [0, c["fy"] * sy, c["cy"] * sy], [0, 0, 1]], np.float32),
             world_from_camera=np.array(v["world_from_camera"], np.float64)))
     points = scene.get("points")
     if points is None:
         sys.exit(f"{scene_dir}/scene.json: no `points` (ingest a dataset with a point cloud)")
-    ply = PlyData.read(points if os.path.isabs(points) else os.path.join(scene_dir, points))
-    vx = ply["vertex"].data
+    vx = read_ply_vertices(points if os.path.isabs(points) else os.path.join(scene_dir, points))
     xyz = np.stack([vx["x"], vx["y"], vx["z"]], 1).astype(np.float32)
     rgb = np.stack([vx["red"], vx["green"], vx["blue"]], 1).astype(np.float32) / 255.0
     return views, xyz, rgb
@@ -75,8 +119,7 @@ def load_scene(scene_dir, downscale):
 
 def load_workload(work_dir):
     """The random Gaussians (INRIA PLY) and cameras `cocog bench --write-workload` wrote."""
-    from plyfile import PlyData
-    vx = PlyData.read(os.path.join(work_dir, "gaussians.ply"))["vertex"].data
+    vx = read_ply_vertices(os.path.join(work_dir, "gaussians.ply"))
     names = vx.dtype.names
     rest = sorted((n for n in names if n.startswith("f_rest_")), key=lambda n: int(n[7:]))
     k = len(rest) // 3 + 1
@@ -87,7 +130,8 @@ def load_workload(work_dir):
         opacity_logits=np.asarray(vx["opacity"]),
         sh0=np.stack([vx[f"f_dc_{c}"] for c in range(3)], 1)[:, None, :],
         # INRIA stores f_rest channel-major: f_rest_{c*(K-1) + j}.
-        shN=np.stack([vx[n] for n in rest], 1).reshape(-1, 3, k - 1).transpose(0, 2, 1)
+        shN=np.ascontiguousarray(
+            np.stack([vx[n] for n in rest], 1).reshape(-1, 3, k - 1).transpose(0, 2, 1))
         if rest else np.zeros((len(vx), 0, 3), np.float32),
         sh_degree=int(round(math.sqrt(k))) - 1)
     with open(os.path.join(work_dir, "cameras.json")) as f:
@@ -138,14 +182,18 @@ def check(args):
 
 # ---- gsplat (torch, CUDA) ---------------------------------------------------------------------
 
-def ssim(a, b):
-    """Mean SSIM of two NCHW images, 11x11 Gaussian window (sigma 1.5), zero padding."""
+def ssim_window(channels, dev):
+    """The 11x11 Gaussian window (sigma 1.5), one per channel."""
     import torch
-    import torch.nn.functional as F
-    x = torch.arange(11, dtype=a.dtype, device=a.device) - 5
+    x = torch.arange(11, dtype=torch.float32, device=dev) - 5
     g = torch.exp(-x ** 2 / (2 * 1.5 ** 2))
     g = g / g.sum()
-    win = (g[:, None] * g[None, :]).expand(a.shape[1], 1, 11, 11).contiguous()
+    return (g[:, None] * g[None, :]).expand(channels, 1, 11, 11).contiguous()
+
+
+def ssim(a, b, win):
+    """Mean SSIM of two NCHW images with `win` (ssim_window), zero padding."""
+    import torch.nn.functional as F
     blur = lambda t: F.conv2d(t, win, padding=5, groups=a.shape[1])
     mu_a, mu_b = blur(a), blur(b)
     va, vb = blur(a * a) - mu_a ** 2, blur(b * b) - mu_b ** 2
@@ -155,11 +203,13 @@ def ssim(a, b):
     return s.mean()
 
 
-def fit(views, params, iterations, extent, strategy=None, reset_every=0, sh_every=1000,
+def fit(views, params, steps, extent, strategy=None, reset_every=0, sh_every=1000,
         max_degree=3, warmup=1):
-    """Trains `params` on the training views; returns seconds of the timed loop."""
+    """Trains `params` on the training views for `steps` steps; returns the seconds of steps
+    `warmup`.. (the first ones pay gsplat's CUDA build) and how many steps that timed."""
     import torch
     from gsplat import rasterization
+    from gsplat.strategy.ops import reset_opa
     dev = params["means"].device
     train = [v for v in views if v["split"] == "train"]
     targets = [torch.from_numpy(v["image"]).to(dev) for v in train]
@@ -169,11 +219,14 @@ def fit(views, params, iterations, extent, strategy=None, reset_every=0, sh_ever
     lrs = dict(means=1.6e-4 * extent, scales=5e-3, quats=1e-3, opacities=5e-2, sh0=2.5e-3,
                shN=2.5e-3 / 20)
     opt = {k: torch.optim.Adam([params[k]], lr=lr, eps=1e-15) for k, lr in lrs.items()}
-    decay = torch.optim.lr_scheduler.ExponentialLR(opt["means"], 0.01 ** (1.0 / iterations))
+    decay = torch.optim.lr_scheduler.ExponentialLR(opt["means"], 0.01 ** (1.0 / steps))
     state = strategy.initialize_state(scene_scale=extent) if strategy else None
+    win = ssim_window(3, dev)
     order = np.random.default_rng(0)
     perm, clock = [], None
-    for it in range(iterations + warmup):
+    if steps <= warmup:
+        sys.exit(f"{steps} steps leave none to time after {warmup} warm-up step(s)")
+    for it in range(steps):
         if it == warmup:
             torch.cuda.synchronize()
             clock = time.perf_counter()
@@ -183,15 +236,15 @@ def fit(views, params, iterations, extent, strategy=None, reset_every=0, sh_ever
         h, w = targets[i].shape[:2]
         degree = min(it // sh_every, max_degree) if sh_every else max_degree
         colors = torch.cat([params["sh0"], params["shN"]], 1)
+        # gsplat normalises the quaternions itself.
         img, _, info = rasterization(
-            params["means"], torch.nn.functional.normalize(params["quats"], dim=-1),
-            torch.exp(params["scales"]), torch.sigmoid(params["opacities"]), colors,
+            params["means"], params["quats"], torch.exp(params["scales"]), torch.sigmoid(params["opacities"]), colors,
             viewmats[i][None], Ks[i][None], w, h, sh_degree=degree, packed=False)
         if strategy:
             strategy.step_pre_backward(params, opt, state, it, info)
         pred = img[0].permute(2, 0, 1)[None]
         gt = targets[i].permute(2, 0, 1)[None]
-        loss = 0.8 * (pred - gt).abs().mean() + 0.2 * (1 - ssim(pred, gt))
+        loss = 0.8 * (pred - gt).abs().mean() + 0.2 * (1 - ssim(pred, gt, win))
         loss.backward()
         for o in opt.values():
             o.step()
@@ -200,10 +253,11 @@ def fit(views, params, iterations, extent, strategy=None, reset_every=0, sh_ever
         if strategy:
             strategy.step_post_backward(params, opt, state, it, info, packed=False)
             if reset_every and it > 0 and it % reset_every == 0 and it < strategy.refine_stop_iter:
-                with torch.no_grad():
-                    params["opacities"].clamp_(max=math.log(0.01 / 0.99))
+                # As INRIA and gsplat's own reset: opacities to at most 0.01, Adam's moments of
+                # the opacities cleared.
+                reset_opa(params=params, optimizers=opt, state=state, value=0.01)
     torch.cuda.synchronize()
-    return time.perf_counter() - clock
+    return time.perf_counter() - clock, steps - warmup
 
 
 def as_params(arrays, dev):
@@ -230,10 +284,11 @@ def train(args):
     strategy = DefaultStrategy(prune_scale3d=args.prune_scale3d, refine_start_iter=500,
                                refine_stop_iter=15000, refine_every=100, reset_every=3000)
     torch.cuda.reset_peak_memory_stats()
-    seconds = fit(views, params, args.iterations, extent, strategy,
-                  reset_every=0 if args.no_opacity_reset else 3000)
+    seconds, timed = fit(views, params, args.iterations, extent, strategy,
+                         reset_every=0 if args.no_opacity_reset else 3000)
     from gsplat import rasterization
     os.makedirs(os.path.join(args.out, "renders"), exist_ok=True)
+    psnrs = []
     with torch.no_grad():
         for v in views:
             if v["split"] != "test":
@@ -246,12 +301,18 @@ def train(args):
                 torch.from_numpy(np.linalg.inv(v["world_from_camera"]).astype(np.float32))
                 .cuda()[None], torch.from_numpy(v["K"]).cuda()[None], w, h, sh_degree=3)
             png = (img[0].clamp(0, 1).cpu().numpy() * 255 + 0.5).astype(np.uint8)
+            # As `cocog eval` scores a saved render: 8-bit against the ground truth.
+            mse = float(((png.astype(np.float64) / 255 - v["image"]) ** 2).mean())
+            psnrs.append(10 * math.log10(1 / max(mse, 1e-20)))
             Image.fromarray(png).save(os.path.join(args.out, "renders",
                                                    os.path.splitext(v["name"])[0] + ".png"))
     result = dict(peer="gsplat", gsplat=__import__("gsplat").__version__,
                   device=torch.cuda.get_device_name(), scene=os.path.abspath(args.scene),
-                  downscale=args.downscale, iterations=args.iterations, seconds=seconds,
-                  it_per_s=args.iterations / seconds, gaussians=len(params["means"]),
+                  downscale=args.downscale, iterations=args.iterations,
+                  timed_iterations=timed, seconds=seconds, it_per_s=timed / seconds,
+                  gaussians=len(params["means"]), initial_gaussians=n,
+                  scene_scale=extent, train_views=sum(v["split"] == "train" for v in views),
+                  test_psnr=float(np.mean(psnrs)) if psnrs else None,
                   peak_gpu_bytes=torch.cuda.max_memory_allocated(),
                   prune_scale3d=args.prune_scale3d, opacity_reset=not args.no_opacity_reset)
     with open(os.path.join(args.out, "result.json"), "w") as f:
@@ -265,8 +326,8 @@ def workload(args):
     params = as_params({k: g[k] for k in ("means", "quats", "sh0", "shN")} |
                        dict(scales=g["log_scales"], opacities=g["opacity_logits"]), "cuda")
     torch.cuda.reset_peak_memory_stats()
-    seconds = fit(views, params, args.iterations, scene_scale(views), sh_every=0,
-                  max_degree=g["sh_degree"], warmup=args.warmup)
+    seconds, _ = fit(views, params, args.iterations + args.warmup, scene_scale(views),
+                     sh_every=0, max_degree=g["sh_degree"], warmup=args.warmup)
     result = dict(peer="gsplat", gsplat=__import__("gsplat").__version__,
                   device=torch.cuda.get_device_name(), workload=os.path.abspath(args.workload),
                   gaussians=len(g["means"]), views=len(views),
