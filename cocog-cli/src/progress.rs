@@ -152,7 +152,20 @@ fn finished_line(task: &str, done: u64, total: u64, first: u64, elapsed: Duratio
     } else {
         String::new()
     };
-    format!("{task}: {done}/{total} in {secs:.1} s ({rate:.1}/s{resumed})")
+    format!(
+        "{task}: {done}/{total} in {secs:.1} s ({}{resumed})",
+        speed(rate)
+    )
+}
+
+/// Items per second, or seconds per item when under one a second (a 24-Mpixel photo's step on
+/// a CPU adapter), so slow work does not read `0.0/s`.
+fn speed(rate: f64) -> String {
+    if rate > 0.0 && rate < 1.0 {
+        format!("{:.1} s each", 1.0 / rate)
+    } else {
+        format!("{rate:.1}/s")
+    }
 }
 
 /// `train: 1200/7000 (17%), 9.8/s, 2m 03s elapsed, about 9m 55s left`; without a total, the
@@ -165,7 +178,7 @@ fn progress_line(task: &str, done: u64, total: u64, first: u64, elapsed: Duratio
         let percent = 100.0 * done as f64 / total as f64;
         line.push_str(&format!("/{total} ({percent:.0}%)"));
     }
-    line.push_str(&format!(", {rate:.1}/s, {} elapsed", clock(secs)));
+    line.push_str(&format!(", {}, {} elapsed", speed(rate), clock(secs)));
     if total > done && rate > 0.0 {
         let left = (total - done) as f64 / rate;
         line.push_str(&format!(", about {} left", clock(left)));
@@ -194,7 +207,20 @@ mod tests {
             "train: 1200/7000 (17%), 9.8/s, 2m 03s elapsed, about 9m 55s left"
         );
         let line = progress_line("load", 5, 0, 0, Duration::from_secs(4000));
-        assert_eq!(line, "load: 5, 0.0/s, 1h 06m elapsed");
+        assert_eq!(line, "load: 5, 800.0 s each, 1h 06m elapsed");
+        let line = progress_line("train", 0, 6, 0, Duration::from_secs(3));
+        assert_eq!(line, "train: 0/6 (0%), 0.0/s, 3s elapsed");
+    }
+
+    #[test]
+    fn slow_work_reads_in_seconds_each() {
+        let line = progress_line("train", 2, 6, 0, Duration::from_secs(86));
+        assert_eq!(
+            line,
+            "train: 2/6 (33%), 43.0 s each, 1m 26s elapsed, about 2m 52s left"
+        );
+        let line = finished_line("train", 6, 6, 0, Duration::from_millis(249_700));
+        assert_eq!(line, "train: 6/6 in 249.7 s (41.6 s each)");
     }
 
     #[test]
