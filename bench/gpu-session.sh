@@ -1,89 +1,142 @@
 #!/usr/bin/env bash
-# Everything a short GPU lease is for, as one bounded command (../shared/notes/gpu-device.md):
+# What a short GPU lease is for, as bounded phases of one command (../shared/notes/gpu-device.md):
 #
-#   bench/gpu-session.sh RESULTS [SECONDS [RESERVE]]      (defaults 560 and 120)
+#   bench/gpu-session.sh RESULTS [PHASE...]        (default: step peer-synthetic peer-train)
 #
-# From DEV (default .device, made on the development machine: the stripped `cocog`, bench/ with
-# sharp-dev and defocus-dev's scenes, lpips/alex.safetensors, and tests.tar.xz holding stripped
-# GPU test executables from `cargo test --no-run`):
-#  1. speed on an otherwise idle GPU: `cocog bench` of sharp-dev at 100×75 and of one million
-#     random Gaussians at 1920×1080 (#11);
-#  2. the GPU tests on this adapter (f64 references and finite differences), beside
-#  3. bench/gates.sh's quality runs, all at once, interrupted where they would outrun the
-#     lease (#9, #12; run the same command again on the same machine to continue them);
-#  4. a 3dgs step against a cocog step at the same Gaussians and size (#12's ≤ 2.5×), from the
-#     dev-table cocog run's model, again on an idle GPU.
-# RESULTS gets bench.txt, tests.log and gates.tgz (logs, scores, learned focus; no models).
+# BUDGET (seconds, default 560) bounds the whole call: a phase that would not fit what is left is
+# skipped and says so in RESULTS/session.txt. From DEV (default .device, made on the development
+# machine: the stripped `cocog`, bench/ with sharp-dev and defocus-dev's scenes, lpips/, the
+# gsplat-1.5.3 wheel, tests.tar.xz of stripped GPU test executables from `cargo test --no-run`):
+#   step            #12's step ratio: a 5000-iteration 3dgs run on dev-table at 100×75 gives the
+#                   Gaussians, then `cocog bench --resume` times a 3dgs step and a cocog step
+#                   (lens, F on) on them, with the per-kernel split (--kernels)          ~60 s
+#   peer-synthetic  #11: `cocog bench --synthetic 1000000 --size 1920x1080`, then gsplat on the
+#                   same Gaussians and cameras (peer_gsplat.py workload)          ~40 s + gsplat build
+#   peer-train      #11: sharp-dev at 400×300, 30000 iterations: `cocog train --method 3dgs`
+#                   (timed without evaluations or checkpoints) and `cocog eval`, then gsplat on
+#                   the same views (peer_gsplat.py train)                          ~350 s + gsplat build
+#   idle-bench      `cocog bench` rows of sharp-dev at 100×75 and 1M random Gaussians at 1080p
+#   tests           the GPU test executables (f64 references, finite differences)      ~150 s
+#   gates SET...    bench/gates.sh's quality runs at once (--jobs 12), interrupted where they would
+#                   outrun the budget; the same command again continues them (e.g. `gates
+#                   12-small 12-variants`; a phase word ends the list)
+# gsplat's CUDA code builds on its first call on a machine (60–80 s on 16 cores); later calls on
+# the same warm machine reuse it. Each phase is run once per machine (a marker in WORK), so a
+# second call continues with what the first did not reach. RESULTS gets session.txt (every
+# phase's output), tests.log, gates.tgz and the peers' result files.
 set -uo pipefail
 
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-results="${1:?usage: bench/gpu-session.sh RESULTS [SECONDS [RESERVE]]}"
-budget="${2:-560}"
-reserve="${3:-120}"
+results="${1:?usage: bench/gpu-session.sh RESULTS [PHASE...]}"
+shift
+phases=("$@")
+((${#phases[@]})) || phases=(step peer-synthetic peer-train)
+budget="${BUDGET:-560}"
 dev="${DEV:-$root/.device}"
 work="${WORK:-/tmp/gpu-session}"
 cocog="$dev/cocog"
 export COCOG="$cocog" COCOG_LPIPS_WEIGHTS="$dev/lpips"
 mkdir -p "$results" "$work"
-bench="$results/bench.txt"
+log="$results/session.txt"
 left() { echo $((budget - SECONDS)); }
+section() { printf '\n== %s (at %d s)\n' "$*" "$SECONDS" >>"$log"; }
+# Runs phase $1 if it was not done on this machine and `left` exceeds $2 seconds.
+due() {
+    [[ -f "$work/done-$1" ]] && return 1
+    if (($(left) < $2)); then
+        section "$1 skipped: $(left) s left, it needs about $2"
+        return 1
+    fi
+    touch "$work/done-$1"
+    section "$1"
+}
 
-section() { printf '\n== %s (at %d s)\n' "$*" "$SECONDS" >>"$bench"; }
 for s in sharp-dev defocus-dev/dev-table; do
     n="$work/in-$(basename "$s")"
     [[ -f "$n/scene.json" ]] || "$cocog" ingest colmap "$dev/bench/$s" -o "$n" -q --force
 done
 
-# 1. Idle-GPU speed, skipped when this is a continuation (the figures exist).
-if [[ ! -f "$work/bench-done" ]]; then
-    section "sharp-dev, 100×75, 3dgs"
-    timeout 90 "$cocog" bench "$work/in-sharp-dev" --downscale 4 --iterations 300 --warmup 30 \
-        >>"$bench" 2>&1
-    section "synthetic 1,000,000 Gaussians, 1920×1080, 3dgs"
-    timeout 120 "$cocog" bench --synthetic 1000000 --size 1920x1080 --iterations 20 --warmup 5 \
-        >>"$bench" 2>&1
-    touch "$work/bench-done"
-fi
-
-# 2. and 3.
-if [[ -f "$dev/tests.tar.xz" && ! -d "$work/tests" ]]; then
-    mkdir -p "$work/tests" && tar xJf "$dev/tests.tar.xz" -C "$work"
-    (
-        for t in "$work"/tests/*; do
-            echo "== $(basename "$t")"
-            CI=true timeout 150 "$t" --test-threads 2 2>&1 | grep -E "^test |test result|panicked|FAILED|assert"
-        done
-    ) >"$results/tests.log" 2>&1 &
-    tests=$!
-fi
-# Trainings stop RESERVE seconds before the end: for their evaluations, the step comparison and
-# the archive.
-"$root/bench/gates.sh" "$work/g" 9-small 12-small 12-variants 9-full --scenes "$dev/bench" \
-    --jobs 12 --deadline $(($(left) - reserve)) 2>"$results/gates.err"
-if [[ -n "${tests:-}" ]]; then
-    while kill -0 "$tests" 2>/dev/null && (($(left) > 75)); do sleep 2; done
-    if kill -0 "$tests" 2>/dev/null; then
-        kids=$(pgrep -P "$tests")
-        kill "$tests" 2>/dev/null
-        [[ -n "$kids" ]] && kill $kids 2>/dev/null
-        echo "(tests stopped at $SECONDS s, still running)" >>"$results/tests.log"
+gsplat_ready() {
+    if [[ ! -d /tmp/site/gsplat ]]; then
+        python3 -m pip install -q --no-index --no-deps --target /tmp/site \
+            "$dev"/gsplat-1.5.3-py3-none-any.whl >>"$log" 2>&1 || return 1
     fi
-fi
+    export PYTHONPATH=/tmp/site TORCH_CUDA_ARCH_LIST="${TORCH_CUDA_ARCH_LIST:-9.0}" \
+        MAX_JOBS="${MAX_JOBS:-16}"
+}
 
-# 4. The same Gaussians through both steps.
-model="$work/g/dev-table-cocog-d4-7000"
-[[ -f "$model/gaussians.ply" ]] || model="$work/g/dev-table-cocog-d4-7000.checkpoint"
-if [[ -e "$model" && ! -f "$work/compare-done" ]] && (($(left) > 30)); then
-    touch "$work/compare-done"
+phase_step() {
+    local model="$work/step-model"
+    timeout 120 "$cocog" train "$work/in-dev-table" -o "$model" --downscale 4 --method 3dgs \
+        --iterations 5000 --checkpoint-every 0 -q --force >>"$log" 2>&1
     for m in 3dgs cocog; do
-        section "dev-table, 100×75, --resume $(basename "$model"), $m"
-        timeout 30 "$cocog" bench "$work/in-dev-table" --downscale 4 --resume "$model" --method "$m" \
-            --iterations 100 --warmup 10 >>"$bench" 2>&1
+        echo "-- $m step on the model's Gaussians" >>"$log"
+        timeout 60 "$cocog" bench "$work/in-dev-table" --downscale 4 --resume "$model" --method "$m" \
+            --iterations 100 --warmup 10 --kernels >>"$log" 2>&1
     done
-fi
+}
 
-tar czf "$results/gates.tgz" -C "$work" --exclude='*.ply' --exclude='*.checkpoint' \
-    --exclude='checkpoint' --exclude='.ingest-*' g
-cp "$work/g/summary.tsv" "$results/" 2>/dev/null
-column -t -s $'\t' "$work/g/summary.tsv" 2>/dev/null || cat "$work/g/summary.tsv"
-echo "gpu-session: done at $SECONDS s"
+phase_peer_synthetic() {
+    timeout 120 "$cocog" bench --synthetic 1000000 --size 1920x1080 --iterations 20 --warmup 5 \
+        --write-workload "$work/workload" >>"$log" 2>&1
+    gsplat_ready && timeout 300 python3 "$root/bench/peer_gsplat.py" workload "$work/workload" \
+        --out "$results/gsplat-synthetic.json" --iterations 20 --warmup 5 >>"$log" 2>&1
+}
+
+phase_peer_train() {
+    local out="$work/peer-cocog-sharp-dev" t0=$SECONDS
+    timeout 400 "$cocog" train "$work/in-sharp-dev" -o "$out" --method 3dgs --iterations 30000 \
+        --checkpoint-every 0 --force >>"$log" 2>&1
+    echo "cocog train: $((SECONDS - t0)) s wall" >>"$log"
+    timeout 60 "$cocog" eval "$out" >>"$log" 2>&1
+    gsplat_ready && timeout 600 python3 "$root/bench/peer_gsplat.py" train "$work/in-sharp-dev" \
+        --out "$results/gsplat-sharp-dev" --iterations 30000 >>"$log" 2>&1
+    rm -f "$results"/gsplat-sharp-dev/renders/*.png
+}
+
+phase_idle_bench() {
+    timeout 90 "$cocog" bench "$work/in-sharp-dev" --downscale 4 --iterations 300 --warmup 30 \
+        >>"$log" 2>&1
+    timeout 120 "$cocog" bench --synthetic 1000000 --size 1920x1080 --iterations 20 --warmup 5 \
+        >>"$log" 2>&1
+}
+
+phase_tests() {
+    [[ -d "$work/tests" ]] || { mkdir -p "$work/tests" && tar xJf "$dev/tests.tar.xz" -C "$work"; }
+    for t in "$work"/tests/*; do
+        echo "== $(basename "$t")"
+        CI=true timeout 150 "$t" --test-threads 2 2>&1 | grep -E "^test |test result|panicked|FAILED|assert"
+    done >"$results/tests.log" 2>&1
+}
+
+phase_gates() {
+    # Trainings stop 60 s before the end, for their evaluations and the archive.
+    "$root/bench/gates.sh" "$work/g" "$@" --scenes "$dev/bench" --jobs 12 \
+        --deadline $(($(left) - 60)) 2>"$results/gates.err"
+    tar czf "$results/gates.tgz" -C "$work" --exclude='*.ply' --exclude='*.checkpoint' \
+        --exclude='checkpoint' --exclude='.ingest-*' g
+    cp "$work/g/summary.tsv" "$results/" 2>/dev/null
+}
+
+i=0
+while ((i < ${#phases[@]})); do
+    p="${phases[i]}"
+    i=$((i + 1))
+    case "$p" in
+        step) due step 90 && phase_step ;;
+        peer-synthetic) due peer-synthetic 150 && phase_peer_synthetic ;;
+        peer-train) due peer-train 450 && phase_peer_train ;;
+        idle-bench) due idle-bench 120 && phase_idle_bench ;;
+        tests) due tests 160 && phase_tests ;;
+        gates)
+            sets=()
+            while ((i < ${#phases[@]})) && [[ "${phases[i]}" == [0-9]* ]]; do
+                sets+=("${phases[i]}")
+                i=$((i + 1))
+            done
+            # No marker: a second call continues the stopped runs.
+            (($(left) > 120)) && section "gates ${sets[*]}" && phase_gates "${sets[@]}" ;;
+        *) echo "gpu-session: unknown phase $p" >&2; exit 2 ;;
+    esac
+done
+echo "gpu-session: done at $SECONDS s" | tee -a "$log"
