@@ -80,6 +80,14 @@ fn radix_sort_full_keys_with_duplicates() {
     check_sort(2048, 37, 32, 2);
 }
 
+/// Hundreds of blocks: digits spread over many blocks' histogram entries, a last block part
+/// full; and 9 bits as a tile sort of a 400×300 frame has (475 tiles), a last pass of 1 bit.
+#[test]
+fn radix_sort_many_blocks() {
+    check_sort(200_003, u32::MAX, 32, 6);
+    check_sort(100_000, 475, 9, 7);
+}
+
 #[test]
 fn radix_sort_partial_bits_is_stable() {
     // Keys above the sorted bits must not affect order, and equal low bits keep input order.

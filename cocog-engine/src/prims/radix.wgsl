@@ -1,8 +1,10 @@
-// Stable LSD radix sort of (u32 key, u32 value) pairs, 4 bits per pass.
-// Per pass: `count_digits` builds a digit-major histogram [16][blocks], the host scans it
-// exclusively, and `scatter` moves each block's elements to their global positions. The
-// scatter ranks elements within a block by a workgroup scan over 16 packed 16-bit counters,
-// so equal digits keep their input order (stability is what makes LSD radix correct).
+// Stable LSD radix sort of (u32 key, u32 value) pairs, 8 bits per pass.
+// Per pass: `count_digits` builds a digit-major histogram [256][blocks] of each block of 1024
+// pairs, PrefixSum turns it into each (digit, block)'s first output position, and `scatter`
+// sorts its block by the pass's digit in workgroup memory (one stable one-bit split per bit)
+// and writes each pair to its (digit, block) position plus its rank among the block's pairs
+// of that digit. The local sort keeps equal digits in input order (stability is what makes LSD
+// radix correct) and writes each digit's run of a block to consecutive addresses.
 
 struct Params {
     // The pair count, or with a GPU count its upper bound (the buffers' capacity).
@@ -11,6 +13,11 @@ struct Params {
     num_blocks: u32,
     // Where in `count_src` the GPU count is, or 0xffffffff when `n` is exact.
     count_at: u32,
+    // The pass's digit mask: 255, or fewer bits on a last pass that sorts fewer than 8.
+    mask: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -31,17 +38,17 @@ fn num_pairs() -> u32 {
 const THREADS: u32 = 256u;
 const ITEMS: u32 = 4u;
 const BLOCK: u32 = 1024u;
-const DIGITS: u32 = 16u;
+const DIGITS: u32 = 256u;
 
-var<workgroup> digit_counts: array<atomic<u32>, 16>;
-// Two vec4 halves of eight u32 words, each packing two 16-bit digit counters.
-var<workgroup> scan_lo: array<vec4<u32>, 256>;
-var<workgroup> scan_hi: array<vec4<u32>, 256>;
-var<workgroup> running: array<u32, 16>;
+fn digit_of(key: u32) -> u32 {
+    return (key >> params.shift) & params.mask;
+}
 
 fn block_index(wid: vec3<u32>, nwg: vec3<u32>) -> u32 {
     return wid.x + wid.y * nwg.x;
 }
+
+var<workgroup> digit_counts: array<atomic<u32>, 256>;
 
 @compute @workgroup_size(256)
 fn count_digits(
@@ -51,31 +58,40 @@ fn count_digits(
 ) {
     let block = block_index(wid, nwg);
     let n = num_pairs();
-    if (tid < DIGITS) {
-        atomicStore(&digit_counts[tid], 0u);
-    }
+    atomicStore(&digit_counts[tid], 0u);
     workgroupBarrier();
     for (var i = 0u; i < ITEMS; i++) {
         let idx = block * BLOCK + i * THREADS + tid;
         if (idx < n) {
-            atomicAdd(&digit_counts[(keys_in[idx] >> params.shift) & 15u], 1u);
+            atomicAdd(&digit_counts[digit_of(keys_in[idx])], 1u);
         }
     }
     workgroupBarrier();
-    if (tid < DIGITS && block < params.num_blocks) {
+    if (block < params.num_blocks) {
         histogram[tid * params.num_blocks + block] = atomicLoad(&digit_counts[tid]);
     }
 }
 
-fn lane(lo: vec4<u32>, hi: vec4<u32>, digit: u32) -> u32 {
-    let word = digit >> 1u;
-    var w: u32;
-    if (word < 4u) {
-        w = lo[word];
-    } else {
-        w = hi[word - 4u];
+var<workgroup> local_keys: array<u32, 1024>;
+var<workgroup> local_values: array<u32, 1024>;
+var<workgroup> sums: array<u32, 256>;
+// Per digit, its first position in the locally sorted block.
+var<workgroup> starts: array<u32, 256>;
+
+// Inclusive sum of `v` over threads 0..=tid.
+fn scan(tid: u32, v: u32) -> u32 {
+    sums[tid] = v;
+    workgroupBarrier();
+    for (var off = 1u; off < THREADS; off <<= 1u) {
+        var s = sums[tid];
+        if (tid >= off) {
+            s += sums[tid - off];
+        }
+        workgroupBarrier();
+        sums[tid] = s;
+        workgroupBarrier();
     }
-    return (w >> ((digit & 1u) * 16u)) & 0xffffu;
+    return sums[tid];
 }
 
 @compute @workgroup_size(256)
@@ -86,54 +102,68 @@ fn scatter(
 ) {
     let block = block_index(wid, nwg);
     let n = num_pairs();
-    if (tid < DIGITS) {
-        running[tid] = 0u;
+    let base = block * BLOCK;
+    var valid = 0u;
+    if (n > base) {
+        valid = min(BLOCK, n - base);
+    }
+    // Pairs past the count take the largest digit: being last in the input, the stable local
+    // sort leaves them last, where nothing writes them out.
+    for (var i = 0u; i < ITEMS; i++) {
+        let p = i * THREADS + tid;
+        if (p < valid) {
+            local_keys[p] = keys_in[base + p];
+            local_values[p] = values_in[base + p];
+        } else {
+            local_keys[p] = params.mask << params.shift;
+            local_values[p] = 0u;
+        }
+    }
+    workgroupBarrier();
+    // Thread tid owns positions 4·tid … 4·tid + 3 during the splits.
+    let bits = countOneBits(params.mask);
+    for (var b = 0u; b < bits; b++) {
+        var k: array<u32, 4>;
+        var v: array<u32, 4>;
+        var ones = 0u;
+        for (var i = 0u; i < ITEMS; i++) {
+            k[i] = local_keys[ITEMS * tid + i];
+            v[i] = local_values[ITEMS * tid + i];
+            ones += (k[i] >> (params.shift + b)) & 1u;
+        }
+        let ones_through = scan(tid, ones);
+        let total_ones = sums[THREADS - 1u];
+        workgroupBarrier();
+        var one_at = BLOCK - total_ones + ones_through - ones;
+        var zero_at = ITEMS * tid - (ones_through - ones);
+        for (var i = 0u; i < ITEMS; i++) {
+            if (((k[i] >> (params.shift + b)) & 1u) == 1u) {
+                local_keys[one_at] = k[i];
+                local_values[one_at] = v[i];
+                one_at += 1u;
+            } else {
+                local_keys[zero_at] = k[i];
+                local_values[zero_at] = v[i];
+                zero_at += 1u;
+            }
+        }
+        workgroupBarrier();
     }
     for (var i = 0u; i < ITEMS; i++) {
-        let idx = block * BLOCK + i * THREADS + tid;
-        let valid = idx < n;
-        var key = 0u;
-        var digit = DIGITS;
-        if (valid) {
-            key = keys_in[idx];
-            digit = (key >> params.shift) & 15u;
+        let p = i * THREADS + tid;
+        let d = digit_of(local_keys[p]);
+        if (p == 0u || digit_of(local_keys[p - 1u]) != d) {
+            starts[d] = p;
         }
-        var lo = vec4<u32>(0u);
-        var hi = vec4<u32>(0u);
-        if (valid) {
-            let one = 1u << ((digit & 1u) * 16u);
-            let word = digit >> 1u;
-            if (word < 4u) {
-                lo[word] = one;
-            } else {
-                hi[word - 4u] = one;
-            }
+    }
+    workgroupBarrier();
+    for (var i = 0u; i < ITEMS; i++) {
+        let p = i * THREADS + tid;
+        if (p < valid) {
+            let d = digit_of(local_keys[p]);
+            let dst = histogram[d * params.num_blocks + block] + p - starts[d];
+            keys_out[dst] = local_keys[p];
+            values_out[dst] = local_values[p];
         }
-        scan_lo[tid] = lo;
-        scan_hi[tid] = hi;
-        workgroupBarrier();
-        for (var off = 1u; off < THREADS; off <<= 1u) {
-            var a = scan_lo[tid];
-            var b = scan_hi[tid];
-            if (tid >= off) {
-                a += scan_lo[tid - off];
-                b += scan_hi[tid - off];
-            }
-            workgroupBarrier();
-            scan_lo[tid] = a;
-            scan_hi[tid] = b;
-            workgroupBarrier();
-        }
-        if (valid) {
-            let rank = lane(scan_lo[tid], scan_hi[tid], digit) - 1u;
-            let dst = histogram[digit * params.num_blocks + block] + running[digit] + rank;
-            keys_out[dst] = key;
-            values_out[dst] = values_in[idx];
-        }
-        workgroupBarrier();
-        if (tid < DIGITS) {
-            running[tid] += lane(scan_lo[THREADS - 1u], scan_hi[THREADS - 1u], tid);
-        }
-        workgroupBarrier();
     }
 }

@@ -5,7 +5,8 @@ use crate::core::{GpuBuffer, GpuContext};
 use crate::core::{Kernel, Recorder, Workspace, shader};
 
 const BLOCK: u32 = 1024;
-const BITS_PER_PASS: u32 = 4;
+const BITS_PER_PASS: u32 = 8;
+const DIGITS: u32 = 1 << BITS_PER_PASS;
 /// `Params::count_at` when the host knows the count.
 const HOST_COUNT: u32 = u32::MAX;
 
@@ -16,6 +17,8 @@ struct Params {
     shift: u32,
     num_blocks: u32,
     count_at: u32,
+    mask: u32,
+    pad: [u32; 3],
 }
 
 #[derive(Debug)]
@@ -94,13 +97,22 @@ impl RadixSort {
             return;
         }
         let num_blocks = n.div_ceil(BLOCK).max(1);
-        let histogram = ws.buffer(rec.ctx(), "radix histogram", u64::from(num_blocks) * 16 * 4);
+        let histogram = ws.buffer(
+            rec.ctx(),
+            "radix histogram",
+            u64::from(num_blocks) * u64::from(DIGITS) * 4,
+        );
         for pass in 0..bits.div_ceil(BITS_PER_PASS) {
+            let shift = pass * BITS_PER_PASS;
+            // The last pass's digit holds only the bits left to sort: keys may carry others.
+            let width = (bits - shift).min(BITS_PER_PASS);
             let params = rec.uniform(&Params {
                 n,
-                shift: pass * BITS_PER_PASS,
+                shift,
                 num_blocks,
                 count_at,
+                mask: (1 << width) - 1,
+                pad: [0; 3],
             });
             self.count.dispatch_1d(
                 rec,
@@ -112,7 +124,7 @@ impl RadixSort {
                 ],
                 num_blocks,
             );
-            prefix_sum.encode(rec, ws, &histogram, num_blocks * 16);
+            prefix_sum.encode(rec, ws, &histogram, num_blocks * DIGITS);
             self.scatter.dispatch_1d(
                 rec,
                 &[
