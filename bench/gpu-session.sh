@@ -4,8 +4,8 @@
 #   bench/gpu-session.sh RESULTS [PHASE...]        (default: step peer-synthetic peer-train)
 #
 # BUDGET (seconds, default 560) bounds the whole call: a phase that would not fit what is left is
-# skipped and says so in RESULTS/session.txt. From DEV (default .device, made on the development
-# machine: the stripped `cocog`, bench/ with sharp-dev and defocus-dev's scenes, lpips/, the
+# skipped and says so in RESULTS/session.txt, and every command's timeout is cut to what is
+# left. From DEV (default .device, made on the development machine: the stripped `cocog`, bench/ with sharp-dev and defocus-dev's scenes, lpips/, the
 # gsplat-1.5.3 wheel, tests.tar.xz of stripped GPU test executables from `cargo test --no-run`):
 #   step            #12's step ratio: a 5000-iteration 3dgs run on dev-table at 100×75 gives the
 #                   Gaussians, then `cocog bench --resume` times a 3dgs step and a cocog step
@@ -21,8 +21,8 @@
 #                   outrun the budget; the same command again continues them (e.g. `gates
 #                   12-small 12-variants`; a phase word ends the list)
 # gsplat's CUDA code builds on its first call on a machine (60–80 s on 16 cores); later calls on
-# the same warm machine reuse it. Each phase is run once per machine (a marker in WORK), so a
-# second call continues with what the first did not reach. RESULTS gets session.txt (every
+# the same warm machine reuse it. A phase that finished leaves a marker in WORK, so a second call
+# on the same machine goes on with the phases the first did not finish. RESULTS gets session.txt (every
 # phase's output), tests.log, gates.tgz and the peers' result files.
 set -uo pipefail
 
@@ -39,16 +39,26 @@ export COCOG="$cocog" COCOG_LPIPS_WEIGHTS="$dev/lpips"
 mkdir -p "$results" "$work"
 log="$results/session.txt"
 left() { echo $((budget - SECONDS)); }
+# `timeout` for at most $1 seconds and never past the budget (10 s kept for the rest).
+bounded() {
+    local most=$1
+    shift
+    local t=$(($(left) - 10))
+    ((t > most)) && t=$most
+    ((t < 1)) && t=1
+    timeout "$t" "$@"
+}
 section() { printf '\n== %s (at %d s)\n' "$*" "$SECONDS" >>"$log"; }
-# Runs phase $1 if it was not done on this machine and `left` exceeds $2 seconds.
-due() {
-    [[ -f "$work/done-$1" ]] && return 1
+# Runs phase $1 (phase_$1 with - as _) unless it finished on this machine or fewer than $2
+# seconds are left.
+run_phase() {
+    [[ -f "$work/done-$1" ]] && return
     if (($(left) < $2)); then
         section "$1 skipped: $(left) s left, it needs about $2"
-        return 1
+        return
     fi
-    touch "$work/done-$1"
     section "$1"
+    "phase_${1//-/_}" && touch "$work/done-$1"
 }
 
 for s in sharp-dev defocus-dev/dev-table; do
@@ -67,45 +77,46 @@ gsplat_ready() {
 
 phase_step() {
     local model="$work/step-model"
-    timeout 120 "$cocog" train "$work/in-dev-table" -o "$model" --downscale 4 --method 3dgs \
+    bounded 120 "$cocog" train "$work/in-dev-table" -o "$model" --downscale 4 --method 3dgs \
         --iterations 5000 --checkpoint-every 0 -q --force >>"$log" 2>&1
     for m in 3dgs cocog; do
         echo "-- $m step on the model's Gaussians" >>"$log"
-        timeout 60 "$cocog" bench "$work/in-dev-table" --downscale 4 --resume "$model" --method "$m" \
+        bounded 60 "$cocog" bench "$work/in-dev-table" --downscale 4 --resume "$model" --method "$m" \
             --iterations 100 --warmup 10 --kernels >>"$log" 2>&1
     done
 }
 
 phase_peer_synthetic() {
-    timeout 120 "$cocog" bench --synthetic 1000000 --size 1920x1080 --iterations 20 --warmup 5 \
+    bounded 120 "$cocog" bench --synthetic 1000000 --size 1920x1080 --iterations 20 --warmup 5 \
         --write-workload "$work/workload" >>"$log" 2>&1
-    gsplat_ready && timeout 300 python3 "$root/bench/peer_gsplat.py" workload "$work/workload" \
+    gsplat_ready && bounded 300 python3 "$root/bench/peer_gsplat.py" workload "$work/workload" \
         --out "$results/gsplat-synthetic.json" --iterations 20 --warmup 5 >>"$log" 2>&1
 }
 
 phase_peer_train() {
     local out="$work/peer-cocog-sharp-dev" t0=$SECONDS
-    timeout 400 "$cocog" train "$work/in-sharp-dev" -o "$out" --method 3dgs --iterations 30000 \
+    bounded 400 "$cocog" train "$work/in-sharp-dev" -o "$out" --method 3dgs --iterations 30000 \
         --checkpoint-every 0 --force >>"$log" 2>&1
     echo "cocog train: $((SECONDS - t0)) s wall" >>"$log"
-    timeout 60 "$cocog" eval "$out" >>"$log" 2>&1
-    gsplat_ready && timeout 600 python3 "$root/bench/peer_gsplat.py" train "$work/in-sharp-dev" \
+    bounded 60 "$cocog" eval "$out" >>"$log" 2>&1
+    gsplat_ready && bounded 600 python3 "$root/bench/peer_gsplat.py" train "$work/in-sharp-dev" \
         --out "$results/gsplat-sharp-dev" --iterations 30000 >>"$log" 2>&1
     rm -f "$results"/gsplat-sharp-dev/renders/*.png
 }
 
 phase_idle_bench() {
-    timeout 90 "$cocog" bench "$work/in-sharp-dev" --downscale 4 --iterations 300 --warmup 30 \
+    bounded 90 "$cocog" bench "$work/in-sharp-dev" --downscale 4 --iterations 300 --warmup 30 \
         >>"$log" 2>&1
-    timeout 120 "$cocog" bench --synthetic 1000000 --size 1920x1080 --iterations 20 --warmup 5 \
+    bounded 120 "$cocog" bench --synthetic 1000000 --size 1920x1080 --iterations 20 --warmup 5 \
         >>"$log" 2>&1
 }
 
 phase_tests() {
-    [[ -d "$work/tests" ]] || { mkdir -p "$work/tests" && tar xJf "$dev/tests.tar.xz" -C "$work"; }
+    [[ -d "$work/tests" ]] || { mkdir -p "$work/tests" && tar xJf "$dev/tests.tar.xz" -C "$work"; } ||
+        return 1
     for t in "$work"/tests/*; do
         echo "== $(basename "$t")"
-        CI=true timeout 150 "$t" --test-threads 2 2>&1 | grep -E "^test |test result|panicked|FAILED|assert"
+        CI=true bounded 150 "$t" --test-threads 2 2>&1 | grep -E "^test |test result|panicked|FAILED|assert"
     done >"$results/tests.log" 2>&1
 }
 
@@ -123,19 +134,23 @@ while ((i < ${#phases[@]})); do
     p="${phases[i]}"
     i=$((i + 1))
     case "$p" in
-        step) due step 90 && phase_step ;;
-        peer-synthetic) due peer-synthetic 150 && phase_peer_synthetic ;;
-        peer-train) due peer-train 450 && phase_peer_train ;;
-        idle-bench) due idle-bench 120 && phase_idle_bench ;;
-        tests) due tests 160 && phase_tests ;;
+        step) run_phase step 90 ;;
+        peer-synthetic) run_phase peer-synthetic 150 ;;
+        peer-train) run_phase peer-train 450 ;;
+        idle-bench) run_phase idle-bench 120 ;;
+        tests) run_phase tests 160 ;;
         gates)
             sets=()
             while ((i < ${#phases[@]})) && [[ "${phases[i]}" == [0-9]* ]]; do
                 sets+=("${phases[i]}")
                 i=$((i + 1))
             done
-            # No marker: a second call continues the stopped runs.
-            (($(left) > 120)) && section "gates ${sets[*]}" && phase_gates "${sets[@]}" ;;
+            if ((${#sets[@]} == 0)); then
+                section "gates skipped: name the sets (e.g. gates 12-small)"
+            elif (($(left) > 120)); then
+                # No marker: a second call continues the stopped runs.
+                section "gates ${sets[*]}" && phase_gates "${sets[@]}"
+            fi ;;
         *) echo "gpu-session: unknown phase $p" >&2; exit 2 ;;
     esac
 done
