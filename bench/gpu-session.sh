@@ -5,11 +5,12 @@
 #
 # BUDGET (seconds, default 560) bounds the whole call: a phase that would not fit what is left is
 # skipped and says so in RESULTS/session.txt, and every command's timeout is cut to what is
-# left. From DEV (default .device, made on the development machine: the stripped `cocog`, bench/ with sharp-dev and defocus-dev's scenes, lpips/, the
-# gsplat-1.5.3 wheel, tests.tar.xz of stripped GPU test executables from `cargo test --no-run`):
+# left. From DEV (default .device, made on the development machine: the stripped `cocog`,
+# bench/ with sharp-dev and defocus-dev's scenes, lpips/, the gsplat-1.5.3 wheel, tests.tar.xz
+# of stripped GPU test executables from `cargo test --no-run`):
 #   step            #12's step ratio: a 5000-iteration 3dgs run on dev-table at 100×75 gives the
 #                   Gaussians, then `cocog bench --resume` times a 3dgs step and a cocog step
-#                   (lens, F on) on them, with the per-kernel split (--kernels)          ~60 s
+#                   (the default variant, F on) on them, with the per-kernel split (--kernels)          ~60 s
 #   peer-synthetic  #11: `cocog bench --synthetic 1000000 --size 1920x1080`, then gsplat on the
 #                   same Gaussians and cameras (peer_gsplat.py workload)          ~40 s + gsplat build
 #   peer-train      #11: sharp-dev at 400×300, 30000 iterations: `cocog train --method 3dgs`
