@@ -265,3 +265,10 @@ fn gpu_uniform_mode_is_the_mean() {
 fn gpu_learned_mode_past_one_channel_block_matches_the_reference() {
     gpu_case(CompositeMode::Learned, 72, 2, 9, 8, 8);
 }
+
+/// Maps large enough that the head's weight gradient splits 327,680 positions into 1024 ranges
+/// of 320 (more ranges than a summing workgroup has threads, longer than the 256 minimum).
+#[test]
+fn gpu_learned_mode_with_a_thousand_ranges_matches_the_reference() {
+    gpu_case(CompositeMode::Learned, 4, 5, 256, 256, 9);
+}

@@ -51,6 +51,8 @@ pub struct StepStats {
     pub readings: Vec<Reading>,
     /// Wall time per phase, only while `Trainer::set_profiling(true)`.
     pub phases: Option<PhaseTimes>,
+    /// Bands of rows the view was trained in: 1 when its frame fits one buffer binding.
+    pub bands: u32,
 }
 
 /// The loss and PSNR of one logged iteration, read back without stalling the GPU.
@@ -296,7 +298,8 @@ impl<'c> Trainer<'c> {
         if config.coc.is_some() {
             binding::check(w, h, &config, ctx.binding_limit(), &ctx.adapter_name())
         } else {
-            bands::plan(w, h, ctx.binding_limit()).map(|_| ())
+            bands::plan(w, h, ctx.binding_limit())
+                .and_then(|_| bands::check_targets(w, h, ctx.device.limits().max_buffer_size))
         }
         .map_err(TrainError::Invalid)?;
         cap::check(state.params.num_gaussians, &config, ctx.binding_limit())?;
@@ -564,6 +567,7 @@ impl<'c> Trainer<'c> {
         let adds_points = d.as_ref().is_some_and(|d| d.adds_points_at(it));
         let reset_in_step = plan.reset_opacity && !adds_points && (on_gpu || !plan.densify);
         let mut batch = self.batch.take().ok_or(TrainError::Poisoned)?;
+        let mut band_count = 1;
         let result = self
             .aim(&mut batch, self.cameras[view], background)
             .and_then(|()| {
@@ -576,6 +580,7 @@ impl<'c> Trainer<'c> {
                     bands::plan(camera.width, camera.height, limit).map_err(TrainError::Invalid)?
                 {
                     self.optimise_banded(&mut rec, &mut batch, view, it, plan, &bands, &mut watch)?;
+                    band_count = bands.len() as u32;
                 } else {
                     self.optimise(&mut rec, &batch, view, it, plan, &mut watch)?;
                 }
@@ -613,6 +618,7 @@ impl<'c> Trainer<'c> {
             num_gaussians: self.num_gaussians(),
             readings,
             phases: watch.result(),
+            bands: band_count,
         })
     }
 

@@ -1,7 +1,7 @@
 //! Training on photos whose per-pixel buffers outgrow one buffer binding (lavapipe binds
 //! 128 MiB: 8.4 Mpixel of rgba f32). A step renders, scores and differentiates the frame band
-//! by band, and adds up the bands' parameter gradients, densification statistics and overflow
-//! status into what one pass over the frame would give:
+//! by band, and adds up the bands' parameter gradients and densification statistics into what
+//! one pass over the frame would give (the step counts as overflowed when any band did):
 //! - a band is whole tile rows, so it renders exactly the frame's pixels (`ImageSpec::rows`);
 //! - it renders one tile row beyond the rows it scores on each side, the 10 rows the SSIM
 //!   gradient of a scored row reads, and only its scored rows get a gradient, so the bands'
@@ -42,11 +42,11 @@ pub(super) fn plan(w: u32, h: u32, limit: u64) -> Result<Option<Vec<FrameBand>>,
     if scored_tiles == 0 {
         return Err(format!(
             "{w}-pixel-wide photos are trained in bands of rows, and a band of 3 tile rows \
-             ({} rows) needs {} MiB, more than the {} MiB this adapter binds: train on smaller \
-             images (--downscale)",
+             ({} rows) needs {}, more than the {} this adapter binds: train on smaller images \
+             (--downscale)",
             3 * TILE_SIZE,
-            (3 * row_bytes * u64::from(TILE_SIZE)) >> 20,
-            limit >> 20
+            mib(3 * row_bytes * u64::from(TILE_SIZE)),
+            mib(limit)
         ));
     }
     let scored = u32::try_from(scored_tiles * u64::from(TILE_SIZE)).unwrap_or(u32::MAX);
@@ -62,6 +62,26 @@ pub(super) fn plan(w: u32, h: u32, limit: u64) -> Result<Option<Vec<FrameBand>>,
             })
             .collect(),
     ))
+}
+
+/// `Err` naming the sizes when a `w`×`h` target photo (kept whole on the GPU, its bands bound
+/// from it) exceeds the largest buffer the adapter creates, `max_buffer` bytes.
+pub(super) fn check_targets(w: u32, h: u32, max_buffer: u64) -> Result<(), String> {
+    let bytes = RGBA_BYTES * u64::from(w) * u64::from(h);
+    if bytes <= max_buffer {
+        return Ok(());
+    }
+    Err(format!(
+        "{w}×{h} photos are kept on the GPU as {} buffers, and this adapter's largest buffer \
+         is {}: train on smaller images (--downscale {} or more)",
+        mib(bytes),
+        mib(max_buffer),
+        (bytes as f64 / max_buffer as f64).sqrt().ceil()
+    ))
+}
+
+fn mib(bytes: u64) -> String {
+    format!("{:.1} MiB", bytes as f64 / f64::from(1 << 20))
 }
 
 /// The kernels of bands.wgsl.
@@ -259,6 +279,14 @@ mod tests {
             assert!(16 * 10 * rows <= limit);
             assert_eq!(b.rendered.0 % TILE_SIZE, 0);
         }
+    }
+
+    #[test]
+    fn a_target_past_the_largest_buffer_is_refused_by_size() {
+        assert!(check_targets(4000, 3000, 192_000_000).is_ok());
+        let e = check_targets(4000, 3000, 191_999_999).unwrap_err();
+        assert!(e.contains("4000×3000") && e.contains("183.1 MiB"), "{e}");
+        assert!(e.contains("--downscale 2"), "{e}");
     }
 
     #[test]
