@@ -10,7 +10,9 @@
 # of stripped GPU test executables from `cargo test --no-run`):
 #   step            #12's step ratio: a 5000-iteration 3dgs run on dev-table at 100×75 gives the
 #                   Gaussians, then `cocog bench --resume` times a 3dgs step and a cocog step
-#                   (the default variant, F on) on them, with the per-kernel split (--kernels)          ~60 s
+#                   (the default variant, F on) on them, the latter with F's convolutions as
+#                   implicit GEMMs and as tiled kernels (COCOG_F_CONV=tiled), with the
+#                   per-kernel split (--kernels)                                         ~80 s
 #   peer-synthetic  #11: `cocog bench --synthetic 1000000 --size 1920x1080`, then gsplat on the
 #                   same Gaussians and cameras (peer_gsplat.py workload)          ~40 s + gsplat build
 #   peer-train      #11: sharp-dev at 400×300, 30000 iterations: `cocog train --method 3dgs`
@@ -80,10 +82,11 @@ phase_step() {
     local model="$work/step-model"
     bounded 120 "$cocog" train "$work/in-dev-table" -o "$model" --downscale 4 --method 3dgs \
         --iterations 5000 --checkpoint-every 0 -q --force >>"$log" 2>&1
-    for m in 3dgs cocog; do
+    for m in 3dgs cocog cocog-tiled; do
         echo "-- $m step on the model's Gaussians" >>"$log"
-        bounded 60 "$cocog" bench "$work/in-dev-table" --downscale 4 --resume "$model" --method "$m" \
-            --iterations 100 --warmup 10 --kernels >>"$log" 2>&1
+        COCOG_F_CONV="${m#cocog-}" bounded 60 "$cocog" bench "$work/in-dev-table" --downscale 4 \
+            --resume "$model" --method "${m%-tiled}" --iterations 100 --warmup 10 --kernels \
+            >>"$log" 2>&1
     done
 }
 
@@ -135,7 +138,7 @@ while ((i < ${#phases[@]})); do
     p="${phases[i]}"
     i=$((i + 1))
     case "$p" in
-        step) run_phase step 90 ;;
+        step) run_phase step 110 ;;
         peer-synthetic) run_phase peer-synthetic 150 ;;
         peer-train) run_phase peer-train 450 ;;
         idle-bench) run_phase idle-bench 120 ;;

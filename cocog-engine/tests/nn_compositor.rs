@@ -5,7 +5,7 @@
 mod common;
 
 use cocog_engine::nn::reference::{Maps, backward, composite, composite_backward, forward};
-use cocog_engine::nn::{CompositeMode, Compositor, CompositorConfig, CompositorLayout};
+use cocog_engine::nn::{CompositeMode, Compositor, CompositorConfig, CompositorLayout, ConvPath};
 use cocog_engine::{Workspace, test_gpu};
 use common::Rng;
 
@@ -141,7 +141,22 @@ fn to_rgba(m: &Maps) -> Vec<f32> {
     out
 }
 
+/// `gpu_case_on` for both ways of running the wide convolutions.
 fn gpu_case(mode: CompositeMode, channels: usize, images: usize, h: usize, w: usize, seed: u64) {
+    for path in [ConvPath::Gemm, ConvPath::Tiled] {
+        gpu_case_on(path, mode, channels, images, h, w, seed);
+    }
+}
+
+fn gpu_case_on(
+    path: ConvPath,
+    mode: CompositeMode,
+    channels: usize,
+    images: usize,
+    h: usize,
+    w: usize,
+    seed: u64,
+) {
     let Some(ctx) = test_gpu() else { return };
     let mut rng = Rng::new(seed);
     let layout = CompositorLayout::new(channels);
@@ -156,7 +171,8 @@ fn gpu_case(mode: CompositeMode, channels: usize, images: usize, h: usize, w: us
         .map(|v| f64::from(*v as f32))
         .collect();
 
-    let comp = Compositor::new(ctx, CompositorConfig::with_channels(channels as u32));
+    let config = CompositorConfig::with_channels(channels as u32);
+    let comp = Compositor::with_conv_path(ctx, config, path);
     let p32: Vec<f32> = p.iter().map(|v| *v as f32).collect();
     let params_buf = ctx.storage_from("params", &p32);
     let renders_buf = ctx.storage_from("renders", &to_rgba(&renders));
@@ -203,7 +219,7 @@ fn gpu_case(mode: CompositeMode, channels: usize, images: usize, h: usize, w: us
     let close = |what: &str, got: f32, want: f64, tol: f64| {
         assert!(
             (f64::from(got) - want).abs() <= tol,
-            "{what}: GPU {got:e} vs reference {want:e}"
+            "{path:?} {what}: GPU {got:e} vs reference {want:e}"
         );
     };
     for y in 0..h {

@@ -2,6 +2,7 @@
 //! blend.wgsl). Every per-step buffer comes from the caller's `Workspace`.
 
 use super::conv_gemm::{ConvGemm, ConvLayer, MapSize, NO_BIAS};
+use super::conv_tile::ConvTile;
 use super::layout::{CompositorConfig, CompositorLayout, IN_EPS};
 use crate::core::{Bind, GpuBuffer, GpuContext, Kernel, Recorder, Workspace, shader};
 
@@ -49,6 +50,28 @@ struct BlendU {
     pad: u32,
 }
 
+/// How F's wide convolutions run their forwards and input gradients (their weight gradients are
+/// implicit GEMMs either way).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ConvPath {
+    /// Implicit GEMMs: the im2col matrix gathered while a tile loads (conv_gemm.rs).
+    Gemm,
+    /// Spatially tiled direct convolutions: a block's input patch staged once per slice of
+    /// channels (conv_tile.rs). As fast as the GEMMs on lavapipe; unmeasured on a GPU.
+    Tiled,
+}
+
+impl ConvPath {
+    /// `COCOG_F_CONV=tiled` picks `Tiled`, anything else `Gemm`: a switch for timing the two
+    /// against each other on a GPU (`cocog bench --method cocog --kernels`).
+    pub fn from_env() -> Self {
+        match std::env::var("COCOG_F_CONV").as_deref() {
+            Ok("tiled") => ConvPath::Tiled,
+            _ => ConvPath::Gemm,
+        }
+    }
+}
+
 /// A forward's results and what its backward replays.
 #[derive(Debug)]
 pub struct CompositeOutput {
@@ -77,6 +100,8 @@ pub struct Compositor {
     config: CompositorConfig,
     /// The C-channel layers as implicit GEMMs.
     gemm: ConvGemm,
+    /// Their forwards and input gradients spatially tiled, with `ConvPath::Tiled`.
+    tile: Option<ConvTile>,
     /// The one-channel head's forward and weight gradient, direct: a 64-row GEMM tile would
     /// compute 63 rows for nothing.
     conv: Kernel,
@@ -91,13 +116,19 @@ pub struct Compositor {
 }
 
 impl Compositor {
+    /// F with the convolution path `ConvPath::from_env` picks.
     pub fn new(ctx: &GpuContext, config: CompositorConfig) -> Self {
+        Self::with_conv_path(ctx, config, ConvPath::from_env())
+    }
+
+    pub fn with_conv_path(ctx: &GpuContext, config: CompositorConfig, path: ConvPath) -> Self {
         let conv = shader(ctx, "compositor conv", include_str!("conv.wgsl"));
         let norm = shader(ctx, "compositor norm", include_str!("norm.wgsl"));
         let blend = shader(ctx, "compositor blend", include_str!("blend.wgsl"));
         Self {
             config,
             gemm: ConvGemm::new(ctx, config.channels),
+            tile: (path == ConvPath::Tiled).then(|| ConvTile::new(ctx)),
             conv: Kernel::new(ctx, &conv, "conv_forward"),
             conv_weight_parts: Kernel::new(ctx, &conv, "conv_weight_grad_part"),
             conv_weight_sum: Kernel::new(ctx, &conv, "conv_weight_grad_sum"),
@@ -192,10 +223,9 @@ impl Compositor {
                 height: h,
                 images,
             };
-            let g = &self.gemm;
-            g.forward(rec, ws, c1, size, params, renders, &l1.0, true);
+            self.conv(rec, ws, c1, size, params, renders, &l1.0, true);
             self.relu_norm(rec, &l1, images * c, w * h);
-            g.forward(rec, ws, c2, size, params, &l1.1, &l2.0, false);
+            self.conv(rec, ws, c2, size, params, &l1.1, &l2.0, false);
             self.relu_norm(rec, &l2, images * c, w * h);
             self.conv_forward(rec, head, params, &l2.1, &logits, w, h, images, false);
             [l1, l2]
@@ -227,6 +257,47 @@ impl Compositor {
             height: h,
             images,
             layers,
+        }
+    }
+
+    /// A wide layer's forward on the chosen path.
+    #[allow(clippy::too_many_arguments)]
+    fn conv(
+        &self,
+        rec: &mut Recorder,
+        ws: &mut Workspace,
+        layer: ConvLayer,
+        size: MapSize,
+        params: &dyn Bind,
+        input: &dyn Bind,
+        output: &dyn Bind,
+        rgba: bool,
+    ) {
+        match &self.tile {
+            Some(t) => t.forward(rec, layer, size, params, input, output, rgba),
+            None => self
+                .gemm
+                .forward(rec, ws, layer, size, params, input, output, rgba),
+        }
+    }
+
+    /// A layer's input gradient on the chosen path.
+    #[allow(clippy::too_many_arguments)]
+    fn conv_input_grad(
+        &self,
+        rec: &mut Recorder,
+        ws: &mut Workspace,
+        layer: ConvLayer,
+        size: MapSize,
+        params: &dyn Bind,
+        v_out: &dyn Bind,
+        v_in: &dyn Bind,
+    ) {
+        match &self.tile {
+            Some(t) => t.input_grad(rec, layer, size, params, v_out, v_in),
+            None => self
+                .gemm
+                .input_grad(rec, ws, layer, size, params, v_out, v_in),
         }
     }
 
@@ -330,10 +401,10 @@ impl Compositor {
             self.weight_grads(
                 rec, ws, head, &l2.1, &v_logits, &v_params, w, h, images, false,
             );
-            g.input_grad(rec, ws, head, size, params, &v_logits, &v_y);
+            self.conv_input_grad(rec, ws, head, size, params, &v_logits, &v_y);
             self.relu_norm_backward(rec, l2, &v_y, &v_z, &grad_stats, images * c, w * h);
             g.weight_grad(rec, ws, c2, size, &l1.1, &v_z, &v_params, false);
-            g.input_grad(rec, ws, c2, size, params, &v_z, &v_y);
+            self.conv_input_grad(rec, ws, c2, size, params, &v_z, &v_y);
             self.relu_norm_backward(rec, l1, &v_y, &v_z, &grad_stats, images * c, w * h);
             g.weight_grad(rec, ws, c1, size, renders, &v_z, &v_params, true);
         }

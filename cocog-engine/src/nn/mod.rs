@@ -4,13 +4,15 @@
 //! so the renders' gradient comes only through that product. Before F starts training the
 //! renders are averaged (`CompositeMode::Uniform`).
 //!
-//! The C-channel convolutions run as tiled implicit GEMMs (conv_gemm.rs); the one-channel
-//! head, a sliver of the work, as direct kernels.
+//! The C-channel convolutions run as tiled implicit GEMMs (conv_gemm.rs), or their forwards and
+//! input gradients as spatially tiled direct convolutions (conv_tile.rs, `ConvPath`); the
+//! one-channel head, a sliver of the work, as direct kernels.
 
 mod composite;
 mod conv_gemm;
+mod conv_tile;
 mod layout;
 pub mod reference;
 
-pub use composite::{CompositeGrads, CompositeMode, CompositeOutput, Compositor};
+pub use composite::{CompositeGrads, CompositeMode, CompositeOutput, Compositor, ConvPath};
 pub use layout::{CompositorConfig, CompositorLayout, IN_EPS};

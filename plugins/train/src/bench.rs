@@ -408,9 +408,14 @@ impl BenchReport {
         let mut out = self.summary();
         if let (Some(g), Some(rate)) = (self.compositor_gflop, self.compositor_gflop_per_s) {
             let share = 100.0 * self.phases_ms.compositor / self.phases_ms.total.max(1e-9);
+            let path = match cocog_engine::nn::ConvPath::from_env() {
+                cocog_engine::nn::ConvPath::Gemm => "implicit GEMMs",
+                cocog_engine::nn::ConvPath::Tiled => "tiled (COCOG_F_CONV=tiled)",
+            };
             out += &format!(
                 "compositor F     {share:.0}% of the profiled step; {g:.2} GFLOP/iteration in its \
-                 convolutions (forward + backward), {rate:.2} GFLOP/s over the compositor phase\n"
+                 convolutions (forward + backward; {path}), {rate:.2} GFLOP/s over the \
+                 compositor phase\n"
             );
         }
         if !self.kernels.is_empty() {

@@ -1,0 +1,122 @@
+//! F's wide convolutions and their input gradients as spatially tiled kernels (conv_tile.wgsl):
+//! the input patch of a block of pixels is staged once per slice of channels, where an im2col
+//! GEMM gathers every tap of every pixel from global memory.
+
+use super::conv_gemm::{ConvLayer, MapSize, NO_BIAS};
+use crate::core::{Bind, GpuContext, Kernel, Recorder, shader};
+
+/// A workgroup's block of pixels (conv_tile.wgsl's TW × TH) and of output channels.
+const TILE_W: u32 = 16;
+const TILE_H: u32 = 8;
+const TILE_M: u32 = 64;
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct TileU {
+    width: u32,
+    height: u32,
+    outputs: u32,
+    summed: u32,
+    w_off: u32,
+    bias_off: u32,
+    rgba_input: u32,
+    transposed: u32,
+}
+
+/// The kernels of one kernel size.
+#[derive(Debug)]
+pub struct ConvTile {
+    k3: Kernel,
+    k5: Kernel,
+}
+
+impl ConvTile {
+    pub fn new(ctx: &GpuContext) -> Self {
+        // Channels per staged slice: the 5×5 slice's weights (64 × CC × 25 floats) and patch
+        // must fit the 16 KiB of workgroup memory every adapter has.
+        let kernel = |ks: u32, cc: u32| {
+            let label = format!("conv tile {ks}×{ks}");
+            let source = format!(
+                "const KS: u32 = {ks}u;\nconst CC: u32 = {cc}u;\n{}",
+                include_str!("conv_tile.wgsl")
+            );
+            Kernel::labelled(ctx, &shader(ctx, &label, &source), "conv_tile", &label)
+        };
+        Self {
+            k3: kernel(3, 4),
+            k5: kernel(5, 2),
+        }
+    }
+
+    fn dispatch(
+        &self,
+        rec: &mut Recorder,
+        ks: u32,
+        u: TileU,
+        images: u32,
+        bindings: [&dyn Bind; 3],
+    ) {
+        let kernel = if ks == 5 { &self.k5 } else { &self.k3 };
+        let uniform = rec.uniform(&u);
+        let grid = [
+            u.width.div_ceil(TILE_W),
+            u.height.div_ceil(TILE_H) * u.outputs.div_ceil(TILE_M),
+            images,
+        ];
+        let [params, input, output] = bindings;
+        kernel.dispatch(
+            rec,
+            &[(0, &uniform), (1, params), (2, input), (3, output)],
+            grid,
+        );
+    }
+
+    /// out = conv(input) + bias for `layer` (in, out, kernel, weights, bias).
+    pub fn forward(
+        &self,
+        rec: &mut Recorder,
+        layer: ConvLayer,
+        size: MapSize,
+        params: &dyn Bind,
+        input: &dyn Bind,
+        output: &dyn Bind,
+        rgba: bool,
+    ) {
+        let (cin, cout, ks, w_off, bias_off) = layer;
+        let u = TileU {
+            width: size.width,
+            height: size.height,
+            outputs: cout,
+            summed: cin,
+            w_off,
+            bias_off,
+            rgba_input: u32::from(rgba),
+            transposed: 0,
+        };
+        self.dispatch(rec, ks, u, size.images, [params, input, output]);
+    }
+
+    /// v_in = the gradient of `layer`'s input from its output's, `v_out`.
+    pub fn input_grad(
+        &self,
+        rec: &mut Recorder,
+        layer: ConvLayer,
+        size: MapSize,
+        params: &dyn Bind,
+        v_out: &dyn Bind,
+        v_in: &dyn Bind,
+    ) {
+        let (cin, cout, ks, w_off, _) = layer;
+        let u = TileU {
+            width: size.width,
+            height: size.height,
+            outputs: cin,
+            summed: cout,
+            w_off,
+            bias_off: NO_BIAS,
+            rgba_input: 0,
+            transposed: 1,
+        };
+        self.dispatch(rec, ks, u, size.images, [params, v_out, v_in]);
+    }
+}
