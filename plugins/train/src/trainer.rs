@@ -243,6 +243,9 @@ pub struct Trainer<'c> {
     densify: crate::GpuDensify,
     /// Gathers a banded step's bands (`bands.rs`).
     bands_kernels: bands::BandKernels,
+    /// The binding frames are planned against (`bands.rs`); the adapter's unless a test
+    /// lowers it.
+    frame_limit: Option<u64>,
     /// CoCoGaussian's h_θ, F and focus distances, when `config.coc` asks for them.
     coc: Option<coc::CocState>,
     rng: SplitMix64,
@@ -338,6 +341,7 @@ impl<'c> Trainer<'c> {
             widen_sh: sh_growth::widen_kernel(ctx),
             densify: crate::GpuDensify::new(ctx),
             bands_kernels: bands::BandKernels::new(ctx),
+            frame_limit: None,
             targets,
             moments: state.moments,
             stats: state.stats,
@@ -387,6 +391,17 @@ impl<'c> Trainer<'c> {
 
     /// Renders as if a buffer binding held `bytes` (tests reach the intersection limit with
     /// it), and holds the room within it.
+    /// Trains frames as if a buffer binding held `bytes`: frames larger than that train in
+    /// bands of rows (tests reach the banded step at small sizes with it).
+    pub fn set_frame_binding_limit(&mut self, bytes: u64) {
+        self.frame_limit = Some(bytes);
+    }
+
+    /// The binding a frame's per-pixel buffers are planned against.
+    fn frame_binding_limit(&self) -> u64 {
+        self.frame_limit.unwrap_or_else(|| self.ctx.binding_limit())
+    }
+
     pub fn set_render_binding_limit(&mut self, bytes: u64) {
         self.renderer = Renderer::new(self.ctx).with_binding_limit(bytes);
         self.set_room(self.capacity);
@@ -573,7 +588,7 @@ impl<'c> Trainer<'c> {
             .and_then(|()| {
                 let mut rec = self.ctx.recorder();
                 let camera = self.cameras[view];
-                let limit = self.renderer.binding_limit(self.ctx);
+                let limit = self.frame_binding_limit();
                 if self.config.coc.as_ref().is_some_and(|c| c.blurs_at(it)) {
                     self.optimise_coc(&mut rec, &batch, view, it, plan, background, &mut watch)?;
                 } else if let Some(bands) =

@@ -66,6 +66,9 @@ fn setup(ctx: &GpuContext) -> (Scene, GaussianParams) {
 fn trainer<'c>(ctx: &'c GpuContext, s: &Scene, init: &GaussianParams, banded: bool) -> Trainer<'c> {
     let mut t = Trainer::new(ctx, init, &s.train, config()).unwrap();
     if banded {
+        // As an adapter that binds this little: frames train in bands, and the renderer's
+        // room for intersections stays within a binding.
+        t.set_frame_binding_limit(THREE_TILE_ROWS);
         t.set_render_binding_limit(THREE_TILE_ROWS);
     }
     t

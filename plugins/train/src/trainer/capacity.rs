@@ -24,7 +24,7 @@ impl Trainer<'_> {
 
     fn most_needed(&mut self, batch: &mut Batch) -> Result<u32, TrainError> {
         let ctx = self.ctx;
-        let limit = self.renderer.binding_limit(ctx);
+        let limit = self.frame_binding_limit();
         let mut most = 0u32;
         for camera in self.cameras.clone() {
             self.aim(batch, camera, self.config.background)?;
