@@ -6,8 +6,9 @@
 # BUDGET (seconds, default 560) bounds the whole call: a phase that would not fit what is left is
 # skipped and says so in RESULTS/session.txt, and every command's timeout is cut to what is
 # left. From DEV (default .device, made on the development machine: the stripped `cocog`,
-# bench/ with sharp-dev and defocus-dev's scenes, lpips/, the gsplat-1.5.3 wheel, tests.tar.xz
-# of stripped GPU test executables from `cargo test --no-run`):
+# bench/ with sharp-dev and defocus-dev/dev-table (gates also want dev-shelf; everything carried
+# must stay under 64 MiB), lpips/, the gsplat-1.5.3 wheel, tests.tar.xz of stripped GPU test
+# executables from `cargo test --no-run`):
 #   step            #12's step ratio: a 5000-iteration 3dgs run on dev-table at 100×75 gives the
 #                   Gaussians, then `cocog bench --resume` times a 3dgs step and a cocog step
 #                   (the default variant, F on) on them, the latter with F's convolutions as
