@@ -160,6 +160,7 @@ fn photos_larger_than_a_binding_train_in_bands() {
             submissions, 3.0,
             "two bands and the optimiser on lavapipe: {said}"
         );
+        assert!(said.contains("trained in 2 bands of rows"), "{said}");
     }
 }
 

@@ -70,6 +70,8 @@ pub struct BenchReport {
     pub width: u32,
     pub height: u32,
     pub views: usize,
+    /// Bands of rows a step trained its frame in (1: the frame fits one buffer binding).
+    pub bands: u32,
     pub start_iteration: u32,
     pub gaussians_start: u32,
     pub gaussians_end: u32,
@@ -334,8 +336,10 @@ fn measure(
         ctx.warn("bench: this adapter has no timestamp queries; no per-kernel times");
     }
     let mut phases = PhaseTimes::default();
+    let mut bands = 1;
     for i in 0..opts.iterations {
         let stats = trainer.step().map_err(StageError::other)?;
+        bands = bands.max(stats.bands);
         if timing {
             gpu.profiler.collect(gpu).map_err(StageError::other)?;
         }
@@ -376,6 +380,7 @@ fn measure(
         width,
         height,
         views: views.len(),
+        bands,
         start_iteration: start,
         gaussians_start,
         gaussians_end: trainer.num_gaussians(),
@@ -439,7 +444,7 @@ impl BenchReport {
         format!(
             "adapter          {} (float atomics: {}, subgroups: {})\n\
              source           {}\n\
-             images           {} views at {}×{}\n\
+             images           {} views at {}×{}{}\n\
              Gaussians        {} → {} (from iteration {})\n\
              method           {}\n\
              throughput       {:.2} it/s, {:.1} ms/iteration ({} iterations)\n\
@@ -454,6 +459,14 @@ impl BenchReport {
             self.views,
             self.width,
             self.height,
+            if self.bands > 1 {
+                format!(
+                    ", trained in {} bands of rows (past one buffer binding)",
+                    self.bands
+                )
+            } else {
+                String::new()
+            },
             self.gaussians_start,
             self.gaussians_end,
             self.start_iteration,
