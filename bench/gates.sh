@@ -13,8 +13,8 @@
 #   12-full    the same at full size, 30000 iterations (#12)
 #   12-variants cocog's lens and code variants (--coc-variant) on both dev scenes, --downscale 4,
 #              7000 iterations (#12 asks for both; 12-small trains the default)
-# On lavapipe (128 MiB bindings) 12-full's cocog runs are refused once F starts: F's maps at
-# 400×300 need 176 MiB; a failed run gets a `failed` row and the others go on.
+# On lavapipe (128 MiB bindings) 12-full's cocog runs fit (F takes its renders in chunks); a
+# failed run gets a `failed` row and the others go on.
 # --iterations N overrides every run's length (a smoke test: the schedules stay as they are);
 # TRAIN_ARGS go to every `cocog train`. --jobs J trains J runs at once (a GPU that small images
 # leave idle between dispatches; their train seconds then time a shared GPU, not a speed figure).

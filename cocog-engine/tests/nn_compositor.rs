@@ -141,15 +141,22 @@ fn to_rgba(m: &Maps) -> Vec<f32> {
     out
 }
 
-/// `gpu_case_on` for both ways of running the wide convolutions.
+/// `gpu_case_on` for both ways of running the wide convolutions, with all renders through F
+/// at once and in chunks of two (a binding that holds two renders' maps: F's maps of more
+/// renders would outgrow it).
 fn gpu_case(mode: CompositeMode, channels: usize, images: usize, h: usize, w: usize, seed: u64) {
+    let two = CompositorConfig::with_channels(channels as u32).map_bytes((h * w) as u64, 2);
     for path in [ConvPath::Gemm, ConvPath::Tiled] {
-        gpu_case_on(path, mode, channels, images, h, w, seed);
+        for limit in [None, Some(two)] {
+            gpu_case_on(path, limit, mode, channels, images, h, w, seed);
+        }
     }
 }
 
+#[allow(clippy::too_many_arguments)]
 fn gpu_case_on(
     path: ConvPath,
+    limit: Option<u64>,
     mode: CompositeMode,
     channels: usize,
     images: usize,
@@ -172,7 +179,10 @@ fn gpu_case_on(
         .collect();
 
     let config = CompositorConfig::with_channels(channels as u32);
-    let comp = Compositor::with_conv_path(ctx, config, path);
+    let mut comp = Compositor::with_conv_path(ctx, config, path);
+    if let Some(bytes) = limit {
+        comp = comp.with_binding_limit(bytes);
+    }
     let p32: Vec<f32> = p.iter().map(|v| *v as f32).collect();
     let params_buf = ctx.storage_from("params", &p32);
     let renders_buf = ctx.storage_from("renders", &to_rgba(&renders));
@@ -219,7 +229,7 @@ fn gpu_case_on(
     let close = |what: &str, got: f32, want: f64, tol: f64| {
         assert!(
             (f64::from(got) - want).abs() <= tol,
-            "{path:?} {what}: GPU {got:e} vs reference {want:e}"
+            "{path:?}, binding {limit:?}: {what}: GPU {got:e} vs reference {want:e}"
         );
     };
     for y in 0..h {

@@ -29,7 +29,7 @@ struct ConvU {
     rgba_input: u32,
     per_part: u32,
     parts: u32,
-    pad: u32,
+    image0: u32,
 }
 
 #[repr(C)]
@@ -83,8 +83,11 @@ pub struct CompositeOutput {
     width: u32,
     height: u32,
     images: u32,
+    /// Renders F ran at once (`Compositor::chunk`); with fewer than `images`, the layers
+    /// hold the last chunk's maps and the backward recomputes each chunk's.
+    chunk: u32,
     /// Per layer: pre-activation, normalised output, statistics (learned mode only).
-    layers: Option<[(GpuBuffer, GpuBuffer, GpuBuffer); 2]>,
+    layers: Option<[Layer; 2]>,
 }
 
 /// Gradients of the renders (rgba, the renders' layout) and of F's parameters (zero in
@@ -113,7 +116,13 @@ pub struct Compositor {
     norm_backward: Kernel,
     blend: Kernel,
     blend_backward: Kernel,
+    accumulate: Kernel,
+    /// Largest buffer binding to plan F's maps for; the device's unless a test lowers it.
+    binding_limit: Option<u64>,
 }
+
+/// One layer's (pre-activation, normalised output, per-plane statistics).
+type Layer = (GpuBuffer, GpuBuffer, GpuBuffer);
 
 impl Compositor {
     /// F with the convolution path `ConvPath::from_env` picks.
@@ -125,6 +134,11 @@ impl Compositor {
         let conv = shader(ctx, "compositor conv", include_str!("conv.wgsl"));
         let norm = shader(ctx, "compositor norm", include_str!("norm.wgsl"));
         let blend = shader(ctx, "compositor blend", include_str!("blend.wgsl"));
+        let sum = shader(
+            ctx,
+            "compositor accumulate",
+            include_str!("accumulate.wgsl"),
+        );
         Self {
             config,
             gemm: ConvGemm::new(ctx, config.channels),
@@ -138,7 +152,70 @@ impl Compositor {
             norm_backward: Kernel::new(ctx, &norm, "norm_backward"),
             blend: Kernel::new(ctx, &blend, "blend_forward"),
             blend_backward: Kernel::new(ctx, &blend, "blend_backward"),
+            accumulate: Kernel::new(ctx, &sum, "add_into"),
+            binding_limit: None,
         }
+    }
+
+    /// Plans F's maps for bindings of at most `bytes` (tests reach the chunked path with it).
+    pub fn with_binding_limit(mut self, bytes: u64) -> Self {
+        self.binding_limit = Some(bytes);
+        self
+    }
+
+    /// Renders F runs at once: all `images`, or as many as one binding holds of a layer's
+    /// maps (at least one; a render whose maps outgrow a binding is refused before training).
+    fn chunk(&self, ctx: &GpuContext, pixels: u64, images: u32) -> u32 {
+        let limit = self.binding_limit.unwrap_or_else(|| ctx.binding_limit());
+        let per_image = self.config.map_bytes(pixels, 1).max(1);
+        u32::try_from(limit / per_image)
+            .unwrap_or(u32::MAX)
+            .clamp(1, images.max(1))
+    }
+
+    /// Both layers' buffers for `images` renders.
+    fn layer_buffers(
+        &self,
+        ws: &mut Workspace,
+        ctx: &GpuContext,
+        pixels: u64,
+        images: u32,
+    ) -> [Layer; 2] {
+        let maps = self.config.map_bytes(pixels, images);
+        let stats = u64::from(images * self.config.channels) * 8;
+        [
+            (
+                ws.buffer(ctx, "compositor z1", maps),
+                ws.buffer(ctx, "compositor y1", maps),
+                ws.buffer(ctx, "compositor stats1", stats),
+            ),
+            (
+                ws.buffer(ctx, "compositor z2", maps),
+                ws.buffer(ctx, "compositor y2", maps),
+                ws.buffer(ctx, "compositor stats2", stats),
+            ),
+        ]
+    }
+
+    /// F's two normalised layers for `size.images` renders from render `size.image0`, into
+    /// `layers` (which hold those renders alone).
+    fn trunk_forward(
+        &self,
+        rec: &mut Recorder,
+        ws: &mut Workspace,
+        params: &dyn Bind,
+        renders: &dyn Bind,
+        [l1, l2]: &[Layer; 2],
+        size: MapSize,
+    ) {
+        let [c1, c2, _] = self.convs();
+        let planes = size.images * self.config.channels;
+        let pixels = size.width * size.height;
+        let local = MapSize { image0: 0, ..size };
+        self.conv(rec, ws, c1, size, params, renders, &l1.0, true);
+        self.relu_norm(rec, l1, planes, pixels);
+        self.conv(rec, ws, c2, local, params, &l1.1, &l2.0, false);
+        self.relu_norm(rec, l2, planes, pixels);
     }
 
     pub fn layout(&self) -> CompositorLayout {
@@ -164,26 +241,24 @@ impl Compositor {
     fn conv_uniform(
         rec: &mut Recorder,
         layer: ConvLayer,
-        w: u32,
-        h: u32,
-        images: u32,
+        size: MapSize,
         rgba: bool,
     ) -> crate::core::UniformSlot {
         let (cin, cout, k, w_off, bias_off) = layer;
-        let (per_part, parts) = weight_grad_split(images * w * h);
+        let (per_part, parts) = weight_grad_split(size.images * size.width * size.height);
         rec.uniform(&ConvU {
-            images,
+            images: size.images,
             cin,
             cout,
             k,
-            height: h,
-            width: w,
+            height: size.height,
+            width: size.width,
             w_off,
             bias_off,
             rgba_input: u32::from(rgba),
             per_part,
             parts,
-            pad: 0,
+            image0: size.image0,
         })
     }
 
@@ -201,34 +276,24 @@ impl Compositor {
     ) -> CompositeOutput {
         let ctx = rec.ctx();
         let pixels = u64::from(w * h);
-        let c = self.config.channels;
-        let maps = self.config.map_bytes(pixels, images);
         let blend = ws.buffer(ctx, "composite blend", pixels * 16);
         let weights = ws.buffer(ctx, "composite weights", pixels * u64::from(images) * 4);
         let logits = ws.buffer(ctx, "composite logits", pixels * u64::from(images) * 4);
+        let chunk = self.chunk(ctx, pixels, images);
         let layers = (mode == CompositeMode::Learned).then(|| {
-            let [c1, c2, head] = self.convs();
-            let l1 = (
-                ws.buffer(ctx, "compositor z1", maps),
-                ws.buffer(ctx, "compositor y1", maps),
-                ws.buffer(ctx, "compositor stats1", u64::from(images * c) * 8),
-            );
-            let l2 = (
-                ws.buffer(ctx, "compositor z2", maps),
-                ws.buffer(ctx, "compositor y2", maps),
-                ws.buffer(ctx, "compositor stats2", u64::from(images * c) * 8),
-            );
-            let size = MapSize {
-                width: w,
-                height: h,
-                images,
-            };
-            self.conv(rec, ws, c1, size, params, renders, &l1.0, true);
-            self.relu_norm(rec, &l1, images * c, w * h);
-            self.conv(rec, ws, c2, size, params, &l1.1, &l2.0, false);
-            self.relu_norm(rec, &l2, images * c, w * h);
-            self.conv_forward(rec, head, params, &l2.1, &logits, w, h, images, false);
-            [l1, l2]
+            let head = self.convs()[2];
+            let layers = self.layer_buffers(ws, ctx, pixels, chunk);
+            for (image0, n) in chunks(images, chunk) {
+                let size = MapSize {
+                    width: w,
+                    height: h,
+                    images: n,
+                    image0,
+                };
+                self.trunk_forward(rec, ws, params, renders, &layers, size);
+                self.conv_forward(rec, head, params, &layers[1].1, &logits, size);
+            }
+            layers
         });
         let u = rec.uniform(&BlendU {
             images,
@@ -256,6 +321,7 @@ impl Compositor {
             width: w,
             height: h,
             images,
+            chunk,
             layers,
         }
     }
@@ -301,21 +367,19 @@ impl Compositor {
         }
     }
 
-    /// The head's forward, one thread per output value.
+    /// The head's forward, one thread per output value, into the logits of renders
+    /// `size.image0`.. .
     fn conv_forward(
         &self,
         rec: &mut Recorder,
         layer: ConvLayer,
-        params: &wgpu::Buffer,
-        input: &wgpu::Buffer,
-        output: &wgpu::Buffer,
-        w: u32,
-        h: u32,
-        images: u32,
-        rgba: bool,
+        params: &dyn Bind,
+        input: &dyn Bind,
+        output: &dyn Bind,
+        size: MapSize,
     ) {
-        let u = Self::conv_uniform(rec, layer, w, h, images, rgba);
-        let total = images * layer.1 * w * h;
+        let u = Self::conv_uniform(rec, layer, size, false);
+        let total = size.images * layer.1 * size.width * size.height;
         self.conv.dispatch_1d(
             rec,
             &[(0, &u), (1, params), (2, input), (3, output)],
@@ -385,33 +449,77 @@ impl Compositor {
             ],
             (w * h).div_ceil(256),
         );
-        if let Some([l1, l2]) = &out.layers {
-            let maps = self.config.map_bytes(pixels, images);
+        if let Some(layers) = &out.layers {
+            let chunk = out.chunk;
+            let maps = self.config.map_bytes(pixels, chunk);
             let v_y = ws.buffer(ctx, "compositor v y", maps);
             let v_z = ws.buffer(ctx, "compositor v z", maps);
-            let grad_stats = ws.buffer(ctx, "compositor grad stats", u64::from(images * c) * 8);
-            let [c1, c2, head] = self.convs();
-            let size = MapSize {
-                width: w,
-                height: h,
-                images,
-            };
-            let g = &self.gemm;
-            // head: weights, then the gradient of its input y2.
-            self.weight_grads(
-                rec, ws, head, &l2.1, &v_logits, &v_params, w, h, images, false,
-            );
-            self.conv_input_grad(rec, ws, head, size, params, &v_logits, &v_y);
-            self.relu_norm_backward(rec, l2, &v_y, &v_z, &grad_stats, images * c, w * h);
-            g.weight_grad(rec, ws, c2, size, &l1.1, &v_z, &v_params, false);
-            self.conv_input_grad(rec, ws, c2, size, params, &v_z, &v_y);
-            self.relu_norm_backward(rec, l1, &v_y, &v_z, &grad_stats, images * c, w * h);
-            g.weight_grad(rec, ws, c1, size, renders, &v_z, &v_params, true);
+            let grad_stats = ws.buffer(ctx, "compositor grad stats", u64::from(chunk * c) * 8);
+            let chunked = chunk < images;
+            let bytes = self.layout().len as u64 * 4;
+            for (image0, n) in chunks(images, chunk) {
+                let size = MapSize {
+                    width: w,
+                    height: h,
+                    images: n,
+                    image0,
+                };
+                // Each chunk writes its whole gradient, then adds it to the view's.
+                let target = if chunked {
+                    self.trunk_forward(rec, ws, params, renders, layers, size);
+                    ws.zeroed(rec, "compositor v params chunk", bytes)
+                } else {
+                    v_params.clone()
+                };
+                let scratch = (&v_y, &v_z, &grad_stats);
+                self.chunk_backward(
+                    rec, ws, params, renders, layers, &v_logits, scratch, &target, size,
+                );
+                if chunked {
+                    let n = self.layout().len as u32;
+                    let u = rec.uniform(&[n, 0, 0, 0]);
+                    self.accumulate.dispatch_1d(
+                        rec,
+                        &[(0, &u), (1, &target), (2, &v_params)],
+                        n.div_ceil(256),
+                    );
+                }
+            }
         }
         CompositeGrads {
             v_renders,
             v_params,
         }
+    }
+
+    /// F's parameter gradient (into `v_params`, every entry written) from renders
+    /// `size.image0`.. whose layers are `layers`, given every render's logit gradient.
+    #[allow(clippy::too_many_arguments)]
+    fn chunk_backward(
+        &self,
+        rec: &mut Recorder,
+        ws: &mut Workspace,
+        params: &wgpu::Buffer,
+        renders: &wgpu::Buffer,
+        [l1, l2]: &[Layer; 2],
+        v_logits: &GpuBuffer,
+        (v_y, v_z, grad_stats): (&GpuBuffer, &GpuBuffer, &GpuBuffer),
+        v_params: &GpuBuffer,
+        size: MapSize,
+    ) {
+        let [c1, c2, head] = self.convs();
+        let planes = size.images * self.config.channels;
+        let pixels = size.width * size.height;
+        let local = MapSize { image0: 0, ..size };
+        let g = &self.gemm;
+        // head: weights, then the gradient of its input y2.
+        self.weight_grads(rec, ws, head, &l2.1, v_logits, v_params, size);
+        self.conv_input_grad(rec, ws, head, size, params, v_logits, v_y);
+        self.relu_norm_backward(rec, l2, v_y, v_z, grad_stats, planes, pixels);
+        g.weight_grad(rec, ws, c2, local, &l1.1, v_z, v_params, false);
+        self.conv_input_grad(rec, ws, c2, local, params, v_z, v_y);
+        self.relu_norm_backward(rec, l1, v_y, v_z, grad_stats, planes, pixels);
+        g.weight_grad(rec, ws, c1, size, renders, v_z, v_params, true);
     }
 
     /// The head's weight gradient: partial sums over ranges of pixels, then one fixed-order
@@ -421,18 +529,15 @@ impl Compositor {
         rec: &mut Recorder,
         ws: &mut Workspace,
         layer: ConvLayer,
-        input: &wgpu::Buffer,
-        v_out: &wgpu::Buffer,
-        v_params: &wgpu::Buffer,
-        w: u32,
-        h: u32,
-        images: u32,
-        rgba: bool,
+        input: &dyn Bind,
+        v_out: &dyn Bind,
+        v_params: &dyn Bind,
+        size: MapSize,
     ) {
-        let u = Self::conv_uniform(rec, layer, w, h, images, rgba);
+        let u = Self::conv_uniform(rec, layer, size, false);
         let (cin, cout, k, _, bias) = layer;
         let count = cout * cin * k * k + if bias == NO_BIAS { 0 } else { cout };
-        let (_, parts) = weight_grad_split(images * w * h);
+        let (_, parts) = weight_grad_split(size.images * size.width * size.height);
         let partials = ws.buffer(
             rec.ctx(),
             "compositor head partials",
@@ -487,4 +592,12 @@ fn weight_grad_split(positions: u32) -> (u32, u32) {
     const MAX_PARTS: u32 = 1024;
     let per_part = positions.div_ceil(MAX_PARTS).max(MIN_PART);
     (per_part, positions.div_ceil(per_part).max(1))
+}
+
+/// (first render, count) of each chunk of at most `chunk` of `images` renders.
+fn chunks(images: u32, chunk: u32) -> impl Iterator<Item = (u32, u32)> {
+    let chunk = chunk.max(1);
+    (0..images)
+        .step_by(chunk as usize)
+        .map(move |i| (i, chunk.min(images - i)))
 }

@@ -21,7 +21,9 @@ struct Conv {
     // The weight gradient's split: (image, pixel) positions per range, and ranges.
     per_part: u32,
     parts: u32,
-    pad: u32,
+    // The chunk's first image in `output` (forward) and `v_out` (weight gradient), which hold
+    // every render's logits; `input` holds the chunk's maps alone.
+    image0: u32,
 }
 
 @group(0) @binding(0) var<uniform> cv: Conv;
@@ -75,7 +77,7 @@ fn conv_forward(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) n
             }
         }
     }
-    output[t] = s;
+    output[t + cv.image0 * cv.cout * hw] = s;
 }
 
 fn weight_count() -> u32 {
@@ -119,7 +121,7 @@ fn conv_weight_grad_part(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_in
         if !bias {
             v = read_input(i, ci, i32(y) + ky, i32(x) + kx);
         }
-        s += v_out[(i * cv.cout + co) * hw + y * cv.width + x] * v;
+        s += v_out[((i + cv.image0) * cv.cout + co) * hw + y * cv.width + x] * v;
         x += 1u;
         if x == cv.width {
             x = 0u;

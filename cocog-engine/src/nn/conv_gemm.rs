@@ -3,9 +3,10 @@
 //! gradients, which sum over every pixel of every render with split K. Maps are
 //! [image][channel][y][x]; the first layer reads the renders' rgba [image][y][x][4].
 //!
-//! Parameters shared by the three (u0…u6): width, height, the other side's channel count (cin
+//! Parameters shared by the three (u0…u7): width, height, the other side's channel count (cin
 //! for the forward and weight gradient, cout for the input gradient), kernel size, weight
-//! offset, bias offset (`NO_BIAS` for none), and 1 for an rgba input.
+//! offset, bias offset (`NO_BIAS` for none), 1 for an rgba input, and the first image's index
+//! in an input that holds every render (`MapSize::image0`).
 
 use crate::core::{Bind, GpuContext, Recorder, Workspace};
 use crate::prims::{Gemm, GemmLayout, GemmShape, GemmTile};
@@ -32,10 +33,11 @@ fn offset(at: vec2<i32>) -> u32 {
 }
 // Image b's value of input channel c at pixel q (rgba renders or [channel][pixel] maps).
 fn input_at(b: u32, c: u32, q: u32) -> f32 {
+    let i = b + gemm.u7;
     if gemm.u6 == 1u {
-        return input[(b * conv_pixels() + q) * 4u + c];
+        return input[(i * conv_pixels() + q) * 4u + c];
     }
-    return input[(b * gemm.u2 + c) * conv_pixels() + q];
+    return input[(i * gemm.u2 + c) * conv_pixels() + q];
 }
 ";
 
@@ -75,7 +77,7 @@ fn load_b(b: u32, k: u32, n: u32) -> f32 {
     let c = vec2<u32>(k / (KS * KS), k % (KS * KS));
     let at = tap(n, c.y, -1);
     if !inside(at) { return 0.0; }
-    return v_out[(b * gemm.u2 + c.x) * conv_pixels() + offset(at)];
+    return v_out[((b + gemm.u7) * gemm.u2 + c.x) * conv_pixels() + offset(at)];
 }
 fn epilogue(b: u32, m: u32, n: u32, v: f32) {
     v_in[(b * gemm.m + m) * conv_pixels() + n] = v;
@@ -127,12 +129,16 @@ pub struct ConvGemm {
     k5: ConvKernels,
 }
 
-/// Maps of `images` renders of `width`×`height`.
+/// Maps of `images` renders of `width`×`height`: a chunk of a view's renders when F's maps of
+/// all of them would outgrow a binding. `image0` is the chunk's first render in the buffers
+/// that hold every render (the renders, the logits and their gradient); the chunk's own maps
+/// start at its first render, so they are read with `image0` 0.
 #[derive(Clone, Copy, Debug)]
 pub struct MapSize {
     pub width: u32,
     pub height: u32,
     pub images: u32,
+    pub image0: u32,
 }
 
 fn shape(
@@ -158,7 +164,7 @@ fn shape(
             w_off,
             bias,
             u32::from(rgba),
-            0,
+            size.image0,
             0,
             0,
         ],

@@ -21,6 +21,8 @@ struct TileU {
     bias_off: u32,
     rgba_input: u32,
     transposed: u32,
+    image0: u32,
+    pad: [u32; 3],
 }
 
 /// The kernels of one kernel size.
@@ -92,6 +94,8 @@ impl ConvTile {
             bias_off,
             rgba_input: u32::from(rgba),
             transposed: 0,
+            image0: size.image0,
+            pad: [0; 3],
         };
         self.dispatch(rec, ks, u, size.images, [params, input, output]);
     }
@@ -116,6 +120,8 @@ impl ConvTile {
             bias_off: NO_BIAS,
             rgba_input: 0,
             transposed: 1,
+            image0: size.image0,
+            pad: [0; 3],
         };
         self.dispatch(rec, ks, u, size.images, [params, v_out, v_in]);
     }

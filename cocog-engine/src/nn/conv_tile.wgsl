@@ -24,6 +24,11 @@ struct ConvTile {
     rgba_input: u32,
     // 1: the input gradient (weights read as W[c][m] flipped, no bias).
     transposed: u32,
+    // The first image's index in the input (MapSize::image0).
+    image0: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> cv: ConvTile;
@@ -61,10 +66,11 @@ fn input_at(b: u32, c: u32, y: i32, x: i32) -> f32 {
         return 0.0;
     }
     let p = u32(y) * cv.width + u32(x);
+    let i = b + cv.image0;
     if cv.rgba_input == 1u {
-        return input[(b * cv.height * cv.width + p) * 4u + c];
+        return input[(i * cv.height * cv.width + p) * 4u + c];
     }
-    return input[(b * cv.summed + c) * cv.height * cv.width + p];
+    return input[(i * cv.summed + c) * cv.height * cv.width + p];
 }
 
 @compute @workgroup_size(256)
