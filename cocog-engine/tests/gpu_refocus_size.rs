@@ -1,6 +1,7 @@
-//! A refocused view renders M + 1 sets at once and, through F, holds its feature maps; it
-//! cannot go in bands, so a view too large for one buffer binding is refused by name, while
-//! its sharp render (aperture 0) still renders in bands.
+//! A refocused view renders M + 1 sets at once and, through F, holds the feature maps of as
+//! many renders as a binding holds (one at least); it cannot go in bands, so a view whose
+//! renders or one render's maps outgrow a buffer binding is refused by name, while its sharp
+//! render (aperture 0) still renders in bands.
 
 mod common;
 
@@ -34,12 +35,9 @@ fn a_refocused_view_too_large_for_a_binding_is_refused_by_name() {
         composite,
     };
     let pixels = 32 * 32;
-    let (rgba, maps) = (16 * pixels * sets, 4 * pixels * sets * u64::from(channels));
-    assert_eq!(
-        rgba, maps,
-        "4 channels: the maps are as large as the renders"
-    );
-    // Exactly enough: both modes render.
+    let rgba = 16 * pixels * sets;
+    // Exactly enough for the renders: both modes render, F in chunks of its renders (each
+    // render's 4-channel maps are a sixth of the renders).
     for mode in [CompositeMode::Learned, CompositeMode::Uniform] {
         let img = refocus(rgba).render(&cam, [0.0; 3], &lens(mode)).unwrap();
         assert_eq!((img.width, img.height), (32, 32));
@@ -54,9 +52,9 @@ fn a_refocused_view_too_large_for_a_binding_is_refused_by_name() {
         "{err}"
     );
     assert!(err.contains("--downscale 2"), "{err}");
-    // 8 channels: F's maps are twice the renders.
-    let f8 = CompositorConfig::with_channels(8).layout().init(2);
-    let mut wide = Refocus::new(ctx, config, 8, frame, &g, &mlp, &f8)
+    // 32 channels: one render's maps are 128 floats a pixel, more than the six renders' 96.
+    let f32c = CompositorConfig::with_channels(32).layout().init(2);
+    let mut wide = Refocus::new(ctx, config, 32, frame, &g, &mlp, &f32c)
         .unwrap()
         .with_binding_limit(rgba);
     let err = wide
@@ -64,7 +62,7 @@ fn a_refocused_view_too_large_for_a_binding_is_refused_by_name() {
         .unwrap_err()
         .to_string();
     assert!(
-        err.contains("8-channel maps") && err.contains("--composite mean"),
+        err.contains("32-channel maps of one render") && err.contains("--composite mean"),
         "{err}"
     );
     // Averaged, the same view fits.

@@ -289,7 +289,7 @@ fn gpu_uniform_mode_is_the_mean() {
 /// More channels than one 64-row tile of the convolutions' matrix products.
 #[test]
 fn gpu_learned_mode_past_one_channel_block_matches_the_reference() {
-    gpu_case(CompositeMode::Learned, 72, 2, 9, 8, 8);
+    gpu_case(CompositeMode::Learned, 72, 3, 9, 8, 8);
 }
 
 /// Maps large enough that the head's weight gradient splits 327,680 positions into 1024 ranges

@@ -88,6 +88,7 @@ impl<'c> Refocus<'c> {
     pub fn with_binding_limit(mut self, bytes: u64) -> Self {
         self.renderer = std::mem::replace(&mut self.renderer, Renderer::new(self.ctx))
             .with_binding_limit(bytes);
+        self.compositor.set_binding_limit(bytes);
         self
     }
 
@@ -204,21 +205,22 @@ impl<'c> Refocus<'c> {
         })
     }
 
-    /// A refocused view renders M + 1 sets at once and, composited by F, holds its feature
-    /// maps (sets × channels floats a pixel): unlike the sharp render it cannot go in bands
-    /// (F's instance norm sees the whole image), so a view too large for one buffer binding
-    /// is refused with the size that fits.
+    /// A refocused view renders M + 1 sets at once and, composited by F, holds the feature
+    /// maps of as many renders as a binding holds (at least one: channels floats a pixel).
+    /// Unlike the sharp render it cannot go in bands (F's instance norm sees the whole image),
+    /// so a view whose renders, or one render's maps, outgrow one buffer binding is refused
+    /// with the size that fits.
     fn check_size(&self, camera: &Camera, composite: CompositeMode) -> Result<(), EngineError> {
         let (w, h) = (camera.width, camera.height);
         let pixels = u64::from(w) * u64::from(h);
         let sets = u64::from(self.kernels.config().copies + 1);
         let channels = self.compositor.layout().channels;
         let rgba = 16 * pixels * sets;
-        let maps = CompositorConfig::with_channels(channels as u32).map_bytes(pixels, sets as u32);
+        let maps = CompositorConfig::with_channels(channels as u32).map_bytes(pixels, 1);
         let (need, what, also) = if composite == CompositeMode::Learned && maps > rgba {
             (
                 maps,
-                format!("the compositor's {channels}-channel maps of {sets} renders"),
+                format!("the compositor's {channels}-channel maps of one render"),
                 ", or average the renders (--composite mean)",
             )
         } else {

@@ -159,8 +159,12 @@ impl Compositor {
 
     /// Plans F's maps for bindings of at most `bytes` (tests reach the chunked path with it).
     pub fn with_binding_limit(mut self, bytes: u64) -> Self {
-        self.binding_limit = Some(bytes);
+        self.set_binding_limit(bytes);
         self
+    }
+
+    pub fn set_binding_limit(&mut self, bytes: u64) {
+        self.binding_limit = Some(bytes);
     }
 
     /// Renders F runs at once: all `images`, or as many as one binding holds of a layer's
