@@ -5,6 +5,7 @@ use super::conv_gemm::{ConvGemm, ConvLayer, MapSize, NO_BIAS};
 use super::conv_tile::ConvTile;
 use super::layout::{CompositorConfig, CompositorLayout, IN_EPS};
 use crate::core::{Bind, GpuBuffer, GpuContext, Kernel, Recorder, Workspace, shader};
+use crate::prims::AddInto;
 
 /// How the renders are weighted.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -116,7 +117,7 @@ pub struct Compositor {
     norm_backward: Kernel,
     blend: Kernel,
     blend_backward: Kernel,
-    accumulate: Kernel,
+    accumulate: AddInto,
     /// Largest buffer binding to plan F's maps for; the device's unless a test lowers it.
     binding_limit: Option<u64>,
 }
@@ -134,11 +135,6 @@ impl Compositor {
         let conv = shader(ctx, "compositor conv", include_str!("conv.wgsl"));
         let norm = shader(ctx, "compositor norm", include_str!("norm.wgsl"));
         let blend = shader(ctx, "compositor blend", include_str!("blend.wgsl"));
-        let sum = shader(
-            ctx,
-            "compositor accumulate",
-            include_str!("accumulate.wgsl"),
-        );
         Self {
             config,
             gemm: ConvGemm::new(ctx, config.channels),
@@ -152,7 +148,7 @@ impl Compositor {
             norm_backward: Kernel::new(ctx, &norm, "norm_backward"),
             blend: Kernel::new(ctx, &blend, "blend_forward"),
             blend_backward: Kernel::new(ctx, &blend, "blend_backward"),
-            accumulate: Kernel::new(ctx, &sum, "add_into"),
+            accumulate: AddInto::new(ctx),
             binding_limit: None,
         }
     }
@@ -287,13 +283,7 @@ impl Compositor {
         let layers = (mode == CompositeMode::Learned).then(|| {
             let head = self.convs()[2];
             let layers = self.layer_buffers(ws, ctx, pixels, chunk);
-            for (image0, n) in chunks(images, chunk) {
-                let size = MapSize {
-                    width: w,
-                    height: h,
-                    images: n,
-                    image0,
-                };
+            for size in chunks(w, h, images, chunk) {
                 self.trunk_forward(rec, ws, params, renders, &layers, size);
                 self.conv_forward(rec, head, params, &layers[1].1, &logits, size);
             }
@@ -461,13 +451,7 @@ impl Compositor {
             let grad_stats = ws.buffer(ctx, "compositor grad stats", u64::from(chunk * c) * 8);
             let chunked = chunk < images;
             let bytes = self.layout().len as u64 * 4;
-            for (image0, n) in chunks(images, chunk) {
-                let size = MapSize {
-                    width: w,
-                    height: h,
-                    images: n,
-                    image0,
-                };
+            for size in chunks(w, h, images, chunk) {
                 // Each chunk writes its whole gradient, then adds it to the view's.
                 let target = if chunked {
                     self.trunk_forward(rec, ws, params, renders, layers, size);
@@ -481,12 +465,7 @@ impl Compositor {
                 );
                 if chunked {
                     let n = self.layout().len as u32;
-                    let u = rec.uniform(&[n, 0, 0, 0]);
-                    self.accumulate.dispatch_1d(
-                        rec,
-                        &[(0, &u), (1, &target), (2, &v_params)],
-                        n.div_ceil(256),
-                    );
+                    self.accumulate.encode(rec, &target, &v_params, n);
                 }
             }
         }
@@ -598,10 +577,15 @@ fn weight_grad_split(positions: u32) -> (u32, u32) {
     (per_part, positions.div_ceil(per_part).max(1))
 }
 
-/// (first render, count) of each chunk of at most `chunk` of `images` renders.
-fn chunks(images: u32, chunk: u32) -> impl Iterator<Item = (u32, u32)> {
+/// The maps of each chunk of at most `chunk` of `images` renders of `w`×`h`.
+fn chunks(w: u32, h: u32, images: u32, chunk: u32) -> impl Iterator<Item = MapSize> {
     let chunk = chunk.max(1);
     (0..images)
         .step_by(chunk as usize)
-        .map(move |i| (i, chunk.min(images - i)))
+        .map(move |image0| MapSize {
+            width: w,
+            height: h,
+            images: chunk.min(images - image0),
+            image0,
+        })
 }

@@ -13,7 +13,7 @@
 use std::num::NonZeroU64;
 
 use cocog_engine::{
-    Batch, Bind, GpuBuffer, GpuContext, Kernel, LossRows, Recorder, TILE_SIZE,
+    AddInto, Batch, Bind, GpuBuffer, GpuContext, Kernel, LossRows, Recorder, TILE_SIZE,
     sh_coeffs_per_channel, shader,
 };
 
@@ -84,10 +84,10 @@ fn mib(bytes: u64) -> String {
     format!("{:.1} MiB", bytes as f64 / f64::from(1 << 20))
 }
 
-/// The kernels of bands.wgsl.
+/// The kernels that gather a frame's bands.
 #[derive(Debug)]
 pub(super) struct BandKernels {
-    add: Kernel,
+    add: AddInto,
     merge_pass: Kernel,
     merge_status: Kernel,
 }
@@ -96,7 +96,7 @@ impl BandKernels {
     pub fn new(ctx: &GpuContext) -> Self {
         let module = shader(ctx, "frame bands", include_str!("bands.wgsl"));
         Self {
-            add: Kernel::new(ctx, &module, "add_into"),
+            add: AddInto::new(ctx),
             merge_pass: Kernel::new(ctx, &module, "merge_pass"),
             merge_status: Kernel::new(ctx, &module, "merge_status"),
         }
@@ -202,15 +202,7 @@ impl<'c> Trainer<'c> {
             let parts = [&g.means, &g.log_scales, &g.quats, &g.opacity_logits, &g.sh];
             let k = &self.bands_kernels;
             for ((sum, part), f) in sums.iter().zip(parts).zip(floats) {
-                let u = band_rec.uniform(&Sizes {
-                    count: f,
-                    pad: [0; 3],
-                });
-                k.add.dispatch_1d(
-                    &mut band_rec,
-                    &[(0, &u), (1, part), (2, sum)],
-                    f.div_ceil(256),
-                );
+                k.add.encode(&mut band_rec, part, sum, f);
             }
             if plan.gather_stats {
                 let u = band_rec.uniform(&Sizes {

@@ -1,8 +1,9 @@
 // A training step on a frame too large for one buffer binding runs band by band; these
-// kernels gather what the bands produce into what one pass over the frame would have.
+// kernels gather what the bands produce into what one pass over the frame would have (the
+// parameters' gradients are summed by the engine's AddInto).
 
 struct Sizes {
-    // Floats of `src`/`dst` (add_into), or Gaussians (merge_pass).
+    // Gaussians.
     count: u32,
     pad0: u32,
     pad1: u32,
@@ -10,8 +11,6 @@ struct Sizes {
 }
 
 @group(0) @binding(0) var<uniform> sizes: Sizes;
-@group(0) @binding(1) var<storage, read> src: array<f32>;
-@group(0) @binding(2) var<storage, read_write> dst: array<f32>;
 // A band's projected records (12 floats a Gaussian, [7] the radius, 0 when culled) and their
 // gradients (10 floats, [0..2] the mean2d's), and the frame's gathered ones.
 @group(0) @binding(3) var<storage, read> projected: array<f32>;
@@ -24,15 +23,6 @@ struct Sizes {
 
 fn index(wg: vec3<u32>, nwg: vec3<u32>, lid: u32) -> u32 {
     return (wg.y * nwg.x + wg.x) * 256u + lid;
-}
-
-// The parameters' gradients: the frame's loss is the sum of the bands'.
-@compute @workgroup_size(256)
-fn add_into(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
-    let i = index(wg, nwg, lid);
-    if i < sizes.count {
-        dst[i] += src[i];
-    }
 }
 
 // What densification's statistics read: visible in the frame when visible in a band (any

@@ -1,5 +1,5 @@
-// F's parameter gradient over a view whose renders run through F in chunks: each chunk's
-// gradient added to the view's.
+// total[i] += part[i] for i < n: summing gradients computed in pieces (a frame's bands, a
+// view's chunks of renders).
 
 struct Count {
     n: u32,
