@@ -4,8 +4,14 @@
 
 mod common;
 
-use cocog_engine::nn::reference::{Maps, backward, composite, composite_backward, forward};
-use cocog_engine::nn::{CompositeMode, Compositor, CompositorConfig, CompositorLayout, ConvPath};
+use cocog_engine::GpuContext;
+use cocog_engine::nn::reference::{
+    Maps, Stored, backward, composite, composite_backward, forward, forward_from_stored,
+    stored_from,
+};
+use cocog_engine::nn::{
+    CompositeMode, Compositor, CompositorConfig, CompositorLayout, ConvPath, MapPrecision,
+};
 use cocog_engine::{Workspace, test_gpu};
 use common::Rng;
 
@@ -143,28 +149,110 @@ fn to_rgba(m: &Maps) -> Vec<f32> {
 
 /// `gpu_case_on` for both ways of running the wide convolutions, with all renders through F
 /// at once and in chunks of two (a binding that holds two renders' maps: F's maps of more
-/// renders would outgrow it).
+/// renders would outgrow it), storing F's maps in f32 and, where the adapter has it, f16.
+///
+/// With f16 maps the reference cannot follow the GPU's roundings (a value near a rounding
+/// boundary goes either way, and a flip propagates), so the GPU is checked layer by layer: each
+/// stored map must be the f16 rounding of the exact layer applied to the GPU's map before it,
+/// and the composite and every gradient must be the reference's computed from the GPU's maps.
+/// Chunked runs recompute the same maps, so they are checked against the unchunked run's.
 fn gpu_case(mode: CompositeMode, channels: usize, images: usize, h: usize, w: usize, seed: u64) {
+    let Some(ctx) = test_gpu() else { return };
     let two = CompositorConfig::with_channels(channels as u32).map_bytes((h * w) as u64, 2);
-    for path in [ConvPath::Gemm, ConvPath::Tiled] {
-        for limit in [None, Some(two)] {
-            gpu_case_on(path, limit, mode, channels, images, h, w, seed);
+    let mut precisions = vec![MapPrecision::F32];
+    if ctx.shader_f16 {
+        precisions.push(MapPrecision::F16);
+    } else {
+        eprintln!(
+            "{}: no SHADER_F16, the f16 maps are not tested",
+            ctx.adapter_name()
+        );
+    }
+    for precision in precisions {
+        for path in [ConvPath::Gemm, ConvPath::Tiled] {
+            let case = (path, precision, mode);
+            let maps = gpu_case_on(case, None, None, channels, images, h, w, seed);
+            gpu_case_on(case, Some(two), maps.as_ref(), channels, images, h, w, seed);
         }
     }
 }
 
+/// The GPU's stored maps of every render, as f64.
+fn read_stored(
+    ctx: &GpuContext,
+    bufs: [&cocog_engine::GpuBuffer; 4],
+    precision: MapPrecision,
+    (images, channels, h, w): (usize, usize, usize, usize),
+) -> Stored {
+    let n = images * channels * h * w;
+    bufs.map(|b| {
+        let data: Vec<f64> = match precision {
+            MapPrecision::F32 => ctx
+                .read::<f32>(b, n)
+                .unwrap()
+                .into_iter()
+                .map(f64::from)
+                .collect(),
+            // Read as words: a copy moves multiples of 4 bytes.
+            MapPrecision::F16 => {
+                let words: Vec<u32> = ctx.read(b, n.div_ceil(2)).unwrap();
+                let halves: &[u16] = bytemuck::cast_slice(&words);
+                halves[..n]
+                    .iter()
+                    .map(|&v| half::f16::from_bits(v).to_f64())
+                    .collect()
+            }
+        };
+        Maps {
+            images,
+            channels,
+            height: h,
+            width: w,
+            data,
+        }
+    })
+}
+
+/// Each of the GPU's f16 maps against the f16 rounding of the exact layer applied to the map
+/// before it, per scalar: round to nearest is within half an ulp (2⁻¹¹ relative; 2⁻²⁵ in
+/// absolute terms below f16's normal range) of the f32 value the GPU computed, which is itself
+/// within f32 rounding (1e-6 of the map's largest value) of the exact one.
+fn check_stored_f16(got: &Stored, want: &Stored) {
+    for (layer, (g, x)) in got.iter().zip(want).enumerate() {
+        let largest = x.data.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let mut rounded_away = 0;
+        for (j, (&gv, &xv)) in g.data.iter().zip(&x.data).enumerate() {
+            let tol = 2f64.powi(-11) * xv.abs() + 2f64.powi(-25) + 1e-6 * largest;
+            assert!(
+                (gv - xv).abs() <= tol,
+                "stored map {layer}, value {j}: GPU {gv:e} vs exact {xv:e}"
+            );
+            rounded_away += usize::from(gv != xv);
+        }
+        // The maps really are f16: nearly every value moved off the exact one.
+        assert!(
+            rounded_away * 2 > x.data.len(),
+            "stored map {layer}: only {rounded_away} of {} values rounded",
+            x.data.len()
+        );
+    }
+}
+
+/// One run, checked against the reference; returns the run's stored maps when it ran
+/// unchunked in learned mode. `given`: an unchunked run's maps, which a chunked f16 run
+/// recomputes.
 #[allow(clippy::too_many_arguments)]
 fn gpu_case_on(
-    path: ConvPath,
+    (path, precision, mode): (ConvPath, MapPrecision, CompositeMode),
     limit: Option<u64>,
-    mode: CompositeMode,
+    given: Option<&Stored>,
     channels: usize,
     images: usize,
     h: usize,
     w: usize,
     seed: u64,
-) {
-    let Some(ctx) = test_gpu() else { return };
+) -> Option<Stored> {
+    let ctx = test_gpu()?;
     let mut rng = Rng::new(seed);
     let layout = CompositorLayout::new(channels);
     // f32-representable inputs, so both sides start from the same numbers.
@@ -179,7 +267,7 @@ fn gpu_case_on(
         .collect();
 
     let config = CompositorConfig::with_channels(channels as u32);
-    let mut comp = Compositor::with_conv_path(ctx, config, path);
+    let mut comp = Compositor::with_options(ctx, config, path, precision);
     if let Some(bytes) = limit {
         comp = comp.with_binding_limit(bytes);
     }
@@ -212,10 +300,23 @@ fn gpu_case_on(
     let blend: Vec<f32> = ctx.read(&out.blend, h * w * 4).unwrap();
     let v_renders: Vec<f32> = ctx.read(&g.v_renders, images * h * w * 4).unwrap();
     let v_p: Vec<f32> = ctx.read(&g.v_params, layout.len).unwrap();
+    let stored = match (limit, out.stored_maps()) {
+        (None, Some(bufs)) => Some(read_stored(ctx, bufs, precision, (images, channels, h, w))),
+        _ => None,
+    };
 
     let (want_blend, want_v_renders, want_v_p, bounds) = match mode {
         CompositeMode::Learned => {
-            let t = forward(&layout, &p, &renders);
+            let t = match precision {
+                MapPrecision::F32 => forward(&layout, &p, &renders),
+                MapPrecision::F16 => {
+                    let maps = given.or(stored.as_ref()).expect("an unchunked run's maps");
+                    if given.is_none() {
+                        check_stored_f16(maps, &stored_from(&layout, &p, &renders, maps));
+                    }
+                    forward_from_stored(&layout, &p, &renders, maps)
+                }
+            };
             let b = backward(&layout, &p, &t, &coef);
             (t.blend, b.v_renders, b.v_params, b.bounds)
         }
@@ -229,7 +330,7 @@ fn gpu_case_on(
     let close = |what: &str, got: f32, want: f64, tol: f64| {
         assert!(
             (f64::from(got) - want).abs() <= tol,
-            "{path:?}, binding {limit:?}: {what}: GPU {got:e} vs reference {want:e}"
+            "{path:?}, {precision:?}, binding {limit:?}: {what}: GPU {got:e} vs reference {want:e}"
         );
     };
     for y in 0..h {
@@ -268,6 +369,7 @@ fn gpu_case_on(
             "too few non-trivial gradients: {checked}"
         );
     }
+    stored
 }
 
 #[test]

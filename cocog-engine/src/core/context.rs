@@ -22,6 +22,8 @@ pub struct GpuContext {
     pub float_atomics: bool,
     /// Subgroup reductions, which cut the backward's atomics by the subgroup width.
     pub subgroups: bool,
+    /// WGSL `f16` in storage buffers: F keeps its feature maps in half precision.
+    pub shader_f16: bool,
     pub memory: Arc<MemoryTracker>,
     /// Buffers created, blocking reads, submissions, dispatches: see `Counters`.
     pub counters: Counters,
@@ -38,6 +40,7 @@ impl std::fmt::Debug for GpuContext {
             .field("adapter", &self.adapter_name())
             .field("float_atomics", &self.float_atomics)
             .field("subgroups", &self.subgroups)
+            .field("shader_f16", &self.shader_f16)
             .finish()
     }
 }
@@ -145,7 +148,12 @@ impl GpuContext {
             && std::env::var("COCOG_NO_FLOAT_ATOMICS").is_err();
         let subgroups = adapter.features().contains(wgpu::Features::SUBGROUP)
             && std::env::var("COCOG_NO_SUBGROUPS").is_err();
+        let shader_f16 = adapter.features().contains(wgpu::Features::SHADER_F16)
+            && std::env::var("COCOG_NO_F16").is_err();
         let mut required_features = wgpu::Features::empty();
+        if shader_f16 {
+            required_features |= wgpu::Features::SHADER_F16;
+        }
         if float_atomics {
             required_features |= wgpu::Features::SHADER_FLOAT32_ATOMIC;
         }
@@ -175,6 +183,7 @@ impl GpuContext {
             adapter_info: info,
             float_atomics,
             subgroups,
+            shader_f16,
             memory: Arc::default(),
             counters: Counters::default(),
             profiler: KernelProfiler::default(),

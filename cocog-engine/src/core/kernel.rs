@@ -133,11 +133,37 @@ impl Kernel {
     }
 }
 
-/// Compiles WGSL `source`.
+/// Compiles WGSL `source`. Its `enable …;` lines move to the top, where WGSL requires them,
+/// so a prelude that needs an extension can be placed anywhere in a composed source.
 pub fn shader(ctx: &GpuContext, label: &str, source: &str) -> wgpu::ShaderModule {
     ctx.device
         .create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some(label),
-            source: wgpu::ShaderSource::Wgsl(source.into()),
+            source: wgpu::ShaderSource::Wgsl(hoist_enables(source).into()),
         })
+}
+
+fn hoist_enables(source: &str) -> String {
+    let is_enable = |l: &&str| l.trim_start().starts_with("enable ");
+    let mut out = String::new();
+    for line in source.lines().filter(is_enable) {
+        let line = format!("{}\n", line.trim());
+        if !out.contains(&line) {
+            out.push_str(&line);
+        }
+    }
+    for line in source.lines().filter(|l| !is_enable(l)) {
+        out.push_str(line);
+        out.push('\n');
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn enable_directives_lead_the_source() {
+        let s = super::hoist_enables("const A: u32 = 1u;\n  enable f16;\nfn f() {}\nenable f16;\n");
+        assert_eq!(s, "enable f16;\nconst A: u32 = 1u;\nfn f() {}\n");
+    }
 }

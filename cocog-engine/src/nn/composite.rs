@@ -4,6 +4,7 @@
 use super::conv_gemm::{ConvGemm, ConvLayer, MapSize, NO_BIAS};
 use super::conv_tile::ConvTile;
 use super::layout::{CompositorConfig, CompositorLayout, IN_EPS};
+use super::precision::MapPrecision;
 use crate::core::{Bind, GpuBuffer, GpuContext, Kernel, Recorder, Workspace, shader};
 use crate::prims::AddInto;
 
@@ -27,7 +28,7 @@ struct ConvU {
     width: u32,
     w_off: u32,
     bias_off: u32,
-    rgba_input: u32,
+    pad: u32,
     per_part: u32,
     parts: u32,
     image0: u32,
@@ -91,6 +92,17 @@ pub struct CompositeOutput {
     layers: Option<[Layer; 2]>,
 }
 
+impl CompositeOutput {
+    /// F's stored maps z1, y1, z2, y2 (`[image][channel][y][x]`, in the compositor's
+    /// `MapPrecision`) of the last chunk of renders, in learned mode: tests compare them with
+    /// the reference layer by layer.
+    pub fn stored_maps(&self) -> Option<[&GpuBuffer; 4]> {
+        self.layers
+            .as_ref()
+            .map(|[l1, l2]| [&l1.0, &l1.1, &l2.0, &l2.1])
+    }
+}
+
 /// Gradients of the renders (rgba, the renders' layout) and of F's parameters (zero in
 /// uniform mode).
 #[derive(Debug)]
@@ -102,6 +114,8 @@ pub struct CompositeGrads {
 #[derive(Debug)]
 pub struct Compositor {
     config: CompositorConfig,
+    /// How the forward maps (each layer's pre-activation and normalised output) are stored.
+    precision: MapPrecision,
     /// The C-channel layers as implicit GEMMs.
     gemm: ConvGemm,
     /// Their forwards and input gradients spatially tiled, with `ConvPath::Tiled`.
@@ -126,19 +140,35 @@ pub struct Compositor {
 type Layer = (GpuBuffer, GpuBuffer, GpuBuffer);
 
 impl Compositor {
-    /// F with the convolution path `ConvPath::from_env` picks.
+    /// F with the convolution path `ConvPath::from_env` picks, storing its maps in the device's
+    /// `MapPrecision`.
     pub fn new(ctx: &GpuContext, config: CompositorConfig) -> Self {
-        Self::with_conv_path(ctx, config, ConvPath::from_env())
+        Self::with_options(
+            ctx,
+            config,
+            ConvPath::from_env(),
+            MapPrecision::for_device(ctx),
+        )
     }
 
-    pub fn with_conv_path(ctx: &GpuContext, config: CompositorConfig, path: ConvPath) -> Self {
-        let conv = shader(ctx, "compositor conv", include_str!("conv.wgsl"));
-        let norm = shader(ctx, "compositor norm", include_str!("norm.wgsl"));
+    /// `MapPrecision::F16` needs a device created with `SHADER_F16` (`GpuContext::shader_f16`).
+    pub fn with_options(
+        ctx: &GpuContext,
+        config: CompositorConfig,
+        path: ConvPath,
+        precision: MapPrecision,
+    ) -> Self {
+        let with_maps = |label: &str, source: &str| {
+            shader(ctx, label, &format!("{}{source}", precision.prelude()))
+        };
+        let conv = with_maps("compositor conv", include_str!("conv.wgsl"));
+        let norm = with_maps("compositor norm", include_str!("norm.wgsl"));
         let blend = shader(ctx, "compositor blend", include_str!("blend.wgsl"));
         Self {
             config,
-            gemm: ConvGemm::new(ctx, config.channels),
-            tile: (path == ConvPath::Tiled).then(|| ConvTile::new(ctx)),
+            precision,
+            gemm: ConvGemm::new(ctx, config.channels, precision),
+            tile: (path == ConvPath::Tiled).then(|| ConvTile::new(ctx, precision)),
             conv: Kernel::new(ctx, &conv, "conv_forward"),
             conv_weight_parts: Kernel::new(ctx, &conv, "conv_weight_grad_part"),
             conv_weight_sum: Kernel::new(ctx, &conv, "conv_weight_grad_sum"),
@@ -151,6 +181,10 @@ impl Compositor {
             accumulate: AddInto::new(ctx),
             binding_limit: None,
         }
+    }
+
+    pub fn precision(&self) -> MapPrecision {
+        self.precision
     }
 
     /// Plans F's maps for bindings of at most `bytes` (tests reach the chunked path with it).
@@ -181,7 +215,8 @@ impl Compositor {
         pixels: u64,
         images: u32,
     ) -> [Layer; 2] {
-        let maps = self.config.map_bytes(pixels, images);
+        // map_bytes counts f32 values; the stored maps take the precision's size.
+        let maps = self.config.map_bytes(pixels, images) / 4 * self.precision.bytes();
         let stats = u64::from(images * self.config.channels) * 8;
         [
             (
@@ -242,7 +277,6 @@ impl Compositor {
         rec: &mut Recorder,
         layer: ConvLayer,
         size: MapSize,
-        rgba: bool,
     ) -> crate::core::UniformSlot {
         let (cin, cout, k, w_off, bias_off) = layer;
         let (per_part, parts) = weight_grad_split(size.images * size.width * size.height);
@@ -255,7 +289,7 @@ impl Compositor {
             width: size.width,
             w_off,
             bias_off,
-            rgba_input: u32::from(rgba),
+            pad: 0,
             per_part,
             parts,
             image0: size.image0,
@@ -372,7 +406,7 @@ impl Compositor {
         output: &dyn Bind,
         size: MapSize,
     ) {
-        let u = Self::conv_uniform(rec, layer, size, false);
+        let u = Self::conv_uniform(rec, layer, size);
         let total = size.images * layer.1 * size.width * size.height;
         self.conv.dispatch_1d(
             rec,
@@ -517,7 +551,7 @@ impl Compositor {
         v_params: &dyn Bind,
         size: MapSize,
     ) {
-        let u = Self::conv_uniform(rec, layer, size, false);
+        let u = Self::conv_uniform(rec, layer, size);
         let (cin, cout, k, _, bias) = layer;
         let count = cout * cin * k * k + if bias == NO_BIAS { 0 } else { cout };
         let (_, parts) = weight_grad_split(size.images * size.width * size.height);

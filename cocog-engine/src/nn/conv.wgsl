@@ -4,7 +4,7 @@
 // pixels, one thread per (weight, range), then each weight's partial sums are added by one
 // workgroup in a fixed order: a thread per weight walking all pixels would leave a GPU with a
 // few hundred threads, each a long chain of dependent loads. Maps are [image][channel][y][x];
-// the first layer reads the renders' rgba [image][y][x][4] directly.
+// the input is a stored map (map_t, the prelude's).
 
 struct Conv {
     images: u32,
@@ -16,8 +16,7 @@ struct Conv {
     // Offsets into the parameter buffer; bias_off = 0xffffffff for none.
     w_off: u32,
     bias_off: u32,
-    // 1 when the input is the renders' rgba layout.
-    rgba_input: u32,
+    pad: u32,
     // The weight gradient's split: (image, pixel) positions per range, and ranges.
     per_part: u32,
     parts: u32,
@@ -28,7 +27,7 @@ struct Conv {
 
 @group(0) @binding(0) var<uniform> cv: Conv;
 @group(0) @binding(1) var<storage, read> params: array<f32>;
-@group(0) @binding(2) var<storage, read> input: array<f32>;
+@group(0) @binding(2) var<storage, read> input: array<map_t>;
 @group(0) @binding(3) var<storage, read_write> output: array<f32>;
 @group(0) @binding(4) var<storage, read> v_out: array<f32>;
 @group(0) @binding(6) var<storage, read_write> v_params: array<f32>;
@@ -45,11 +44,7 @@ fn read_input(i: u32, c: u32, y: i32, x: i32) -> f32 {
     if y < 0 || x < 0 || y >= i32(cv.height) || x >= i32(cv.width) {
         return 0.0;
     }
-    let p = (i * cv.height + u32(y)) * cv.width + u32(x);
-    if cv.rgba_input == 1u {
-        return input[p * 4u + c];
-    }
-    return input[((i * cv.cin + c) * cv.height + u32(y)) * cv.width + u32(x)];
+    return f32(input[((i * cv.cin + c) * cv.height + u32(y)) * cv.width + u32(x)]);
 }
 
 @compute @workgroup_size(256)

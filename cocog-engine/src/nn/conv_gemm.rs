@@ -7,7 +7,12 @@
 //! for the forward and weight gradient, cout for the input gradient), kernel size, weight
 //! offset, bias offset (`NO_BIAS` for none), 1 for an rgba input, and the first image's index
 //! in an input that holds every render (`MapSize::image0`).
+//!
+//! Element types: the forward writes a stored map (`map_t`, see precision.rs); the input is
+//! `in_t`, the renders' f32 for the 5×5 layer and a stored map for the 3×3 ones; gradients are
+//! f32.
 
+use super::precision::MapPrecision;
 use crate::core::{Bind, GpuContext, Recorder, Workspace};
 use crate::prims::{Gemm, GemmLayout, GemmShape, GemmTile};
 
@@ -35,9 +40,9 @@ fn offset(at: vec2<i32>) -> u32 {
 fn input_at(b: u32, c: u32, q: u32) -> f32 {
     let i = b + gemm.u7;
     if gemm.u6 == 1u {
-        return input[(i * conv_pixels() + q) * 4u + c];
+        return f32(input[(i * conv_pixels() + q) * 4u + c]);
     }
-    return input[(i * gemm.u2 + c) * conv_pixels() + q];
+    return f32(input[(i * gemm.u2 + c) * conv_pixels() + q]);
 }
 ";
 
@@ -45,8 +50,8 @@ fn input_at(b: u32, c: u32, q: u32) -> f32 {
 /// one batch per image. M = cout, N = pixels, K = cin × k².
 const FORWARD: &str = "
 @group(0) @binding(2) var<storage, read> params: array<f32>;
-@group(0) @binding(3) var<storage, read> input: array<f32>;
-@group(0) @binding(4) var<storage, read_write> output: array<f32>;
+@group(0) @binding(3) var<storage, read> input: array<in_t>;
+@group(0) @binding(4) var<storage, read_write> output: array<map_t>;
 fn load_a(b: u32, m: u32, k: u32) -> f32 { return params[gemm.u4 + m * gemm.k + k]; }
 fn load_b(b: u32, k: u32, n: u32) -> f32 {
     let c = vec2<u32>(k / (KS * KS), k % (KS * KS));
@@ -57,7 +62,7 @@ fn load_b(b: u32, k: u32, n: u32) -> f32 {
 fn epilogue(b: u32, m: u32, n: u32, v: f32) {
     var bias = 0.0;
     if gemm.u5 != 0xffffffffu { bias = params[gemm.u5 + m]; }
-    output[(b * gemm.m + m) * conv_pixels() + n] = v + bias;
+    output[(b * gemm.m + m) * conv_pixels() + n] = map_t(v + bias);
 }
 ";
 
@@ -68,7 +73,7 @@ const INPUT_GRAD: &str = "
 @group(0) @binding(3) var<storage, read> v_out: array<f32>;
 @group(0) @binding(4) var<storage, read_write> v_in: array<f32>;
 // input_at refers to it; no loader here calls it, so it is never bound.
-@group(0) @binding(5) var<storage, read> input: array<f32>;
+@group(0) @binding(5) var<storage, read> input: array<in_t>;
 fn load_a(b: u32, m: u32, k: u32) -> f32 {
     let c = vec2<u32>(k / (KS * KS), k % (KS * KS));
     return params[gemm.u4 + (c.x * gemm.m + m) * KS * KS + c.y];
@@ -88,7 +93,7 @@ fn epilogue(b: u32, m: u32, n: u32, v: f32) {
 /// a column of ones; summed over every image (batch) and pixel. M = cout, N = cin × k² (+1),
 /// K = pixels.
 const WEIGHT_GRAD: &str = "
-@group(0) @binding(2) var<storage, read> input: array<f32>;
+@group(0) @binding(2) var<storage, read> input: array<in_t>;
 @group(0) @binding(3) var<storage, read> v_out: array<f32>;
 @group(0) @binding(4) var<storage, read_write> v_params: array<f32>;
 fn taps() -> u32 { return gemm.u2 * conv_ksize() * conv_ksize(); }
@@ -173,8 +178,15 @@ fn shape(
 
 impl ConvKernels {
     /// `cin` is the input channel count of the layer with this kernel size (its weight
-    /// gradient's width).
-    fn new(ctx: &GpuContext, channels: u32, ks: u32, cin: u32) -> Self {
+    /// gradient's width), `input` the element type of its input.
+    fn new(
+        ctx: &GpuContext,
+        channels: u32,
+        ks: u32,
+        cin: u32,
+        precision: MapPrecision,
+        input: &str,
+    ) -> Self {
         // Per pixel the forward and input gradient are `channels` wide; the weight gradient is
         // channels × (taps + bias).
         let maps = GemmTile::for_shape(channels, 1 << 16);
@@ -184,7 +196,10 @@ impl ConvKernels {
             Gemm::new(
                 ctx,
                 &format!("{label} {ks}×{ks}"),
-                &format!("const KS: u32 = {ks}u;\n{COMMON}{body}"),
+                &format!(
+                    "{}alias in_t = {input};\nconst KS: u32 = {ks}u;\n{COMMON}{body}",
+                    precision.prelude()
+                ),
                 GemmLayout {
                     a_k_fast,
                     b_k_fast,
@@ -202,11 +217,12 @@ impl ConvKernels {
 }
 
 impl ConvGemm {
-    /// Kernels tiled for layers of `channels` outputs (and inputs, for the input gradient).
-    pub fn new(ctx: &GpuContext, channels: u32) -> Self {
+    /// Kernels tiled for layers of `channels` outputs (and inputs, for the input gradient):
+    /// the 5×5 layer reads the renders, the 3×3 ones F's stored maps.
+    pub fn new(ctx: &GpuContext, channels: u32, precision: MapPrecision) -> Self {
         Self {
-            k3: ConvKernels::new(ctx, channels, 3, channels),
-            k5: ConvKernels::new(ctx, channels, 5, 3),
+            k3: ConvKernels::new(ctx, channels, 3, channels, precision, "map_t"),
+            k5: ConvKernels::new(ctx, channels, 5, 3, precision, "f32"),
         }
     }
 

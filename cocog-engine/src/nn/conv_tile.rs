@@ -3,6 +3,7 @@
 //! GEMM gathers every tap of every pixel from global memory.
 
 use super::conv_gemm::{ConvLayer, MapSize, NO_BIAS};
+use super::precision::MapPrecision;
 use crate::core::{Bind, GpuContext, Kernel, Recorder, shader};
 
 /// A workgroup's block of pixels (conv_tile.wgsl's TW × TH) and of output channels.
@@ -25,40 +26,46 @@ struct TileU {
     pad: [u32; 3],
 }
 
-/// The kernels of one kernel size.
+/// The kernels per kernel size and direction: each reads and writes its own element types.
 #[derive(Debug)]
 pub struct ConvTile {
-    k3: Kernel,
-    k5: Kernel,
+    /// 5×5, the renders (f32 rgba) into a stored map.
+    first: Kernel,
+    /// 3×3, a stored map into a stored map.
+    forward3: Kernel,
+    /// 3×3 transposed, an f32 gradient map into an f32 gradient map.
+    grad3: Kernel,
 }
 
 impl ConvTile {
-    pub fn new(ctx: &GpuContext) -> Self {
+    pub fn new(ctx: &GpuContext, precision: MapPrecision) -> Self {
         // Channels per staged slice: the 5×5 slice's weights (64 × CC × 25 floats) and patch
         // must fit the 16 KiB of workgroup memory every adapter has.
-        let kernel = |ks: u32, cc: u32| {
-            let label = format!("conv tile {ks}×{ks}");
+        let kernel = |ks: u32, cc: u32, input: &str, output: &str| {
+            let label = format!("conv tile {ks}×{ks} {input}→{output}");
             let source = format!(
-                "const KS: u32 = {ks}u;\nconst CC: u32 = {cc}u;\n{}",
+                "{}alias in_t = {input};\nalias out_t = {output};\n\
+                 const KS: u32 = {ks}u;\nconst CC: u32 = {cc}u;\n{}",
+                precision.prelude(),
                 include_str!("conv_tile.wgsl")
             );
             Kernel::labelled(ctx, &shader(ctx, &label, &source), "conv_tile", &label)
         };
         Self {
-            k3: kernel(3, 4),
-            k5: kernel(5, 2),
+            first: kernel(5, 2, "f32", "map_t"),
+            forward3: kernel(3, 4, "map_t", "map_t"),
+            grad3: kernel(3, 4, "f32", "f32"),
         }
     }
 
     fn dispatch(
         &self,
         rec: &mut Recorder,
-        ks: u32,
+        kernel: &Kernel,
         u: TileU,
         images: u32,
         bindings: [&dyn Bind; 3],
     ) {
-        let kernel = if ks == 5 { &self.k5 } else { &self.k3 };
         let uniform = rec.uniform(&u);
         let grid = [
             u.width.div_ceil(TILE_W),
@@ -97,7 +104,10 @@ impl ConvTile {
             image0: size.image0,
             pad: [0; 3],
         };
-        self.dispatch(rec, ks, u, size.images, [params, input, output]);
+        // F's first layer reads the renders, the rest F's stored maps.
+        let kernel = if rgba { &self.first } else { &self.forward3 };
+        assert_eq!(ks, if rgba { 5 } else { 3 }, "F's layer shapes");
+        self.dispatch(rec, kernel, u, size.images, [params, input, output]);
     }
 
     /// v_in = the gradient of `layer`'s input from its output's, `v_out`.
@@ -123,6 +133,8 @@ impl ConvTile {
             image0: size.image0,
             pad: [0; 3],
         };
-        self.dispatch(rec, ks, u, size.images, [params, v_out, v_in]);
+        // F's renders are detached: only its 3×3 layers take an input gradient.
+        assert_eq!(ks, 3, "F's first layer has no input gradient");
+        self.dispatch(rec, &self.grad3, u, size.images, [params, v_out, v_in]);
     }
 }

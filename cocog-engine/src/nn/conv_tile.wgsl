@@ -8,7 +8,8 @@
 //
 // The same kernel computes the input gradient of a convolution: the gradient is the
 // convolution of the output gradient with the kernel transposed (in ↔ out) and flipped
-// (TRANSPOSED). The prelude defines KS (3 or 5) and CC.
+// (TRANSPOSED). The prelude defines KS (3 or 5), CC, and the element types in_t and out_t of
+// the input and output (f32, or map_t for F's stored maps).
 //
 // Maps are [image][channel][y][x]; with rgba_input the input is the renders' [image][y][x][4].
 
@@ -33,8 +34,8 @@ struct ConvTile {
 
 @group(0) @binding(0) var<uniform> cv: ConvTile;
 @group(0) @binding(1) var<storage, read> params: array<f32>;
-@group(0) @binding(2) var<storage, read> input: array<f32>;
-@group(0) @binding(3) var<storage, read_write> output: array<f32>;
+@group(0) @binding(2) var<storage, read> input: array<in_t>;
+@group(0) @binding(3) var<storage, read_write> output: array<out_t>;
 
 const KK: u32 = KS * KS;
 const PAD: i32 = i32(KS / 2u);
@@ -68,9 +69,9 @@ fn input_at(b: u32, c: u32, y: i32, x: i32) -> f32 {
     let p = u32(y) * cv.width + u32(x);
     let i = b + cv.image0;
     if cv.rgba_input == 1u {
-        return input[(i * cv.height * cv.width + p) * 4u + c];
+        return f32(input[(i * cv.height * cv.width + p) * 4u + c]);
     }
-    return input[(i * cv.summed + c) * cv.height * cv.width + p];
+    return f32(input[(i * cv.summed + c) * cv.height * cv.width + p]);
 }
 
 @compute @workgroup_size(256)
@@ -138,7 +139,7 @@ fn conv_tile(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_ind
         for (var j = 0u; j < RUN; j++) {
             let x = x0 + col + j;
             if x < cv.width {
-                output[out_row + x] = acc[j][i] + bias;
+                output[out_row + x] = out_t(acc[j][i] + bias);
             }
         }
     }

@@ -6,13 +6,16 @@
 //!
 //! The C-channel convolutions run as tiled implicit GEMMs (conv_gemm.rs), or their forwards and
 //! input gradients as spatially tiled direct convolutions (conv_tile.rs, `ConvPath`); the
-//! one-channel head, a sliver of the work, as direct kernels.
+//! one-channel head, a sliver of the work, as direct kernels. The forward maps are stored in
+//! half precision where the adapter allows (precision.rs).
 
 mod composite;
 mod conv_gemm;
 mod conv_tile;
 mod layout;
+mod precision;
 pub mod reference;
 
 pub use composite::{CompositeGrads, CompositeMode, CompositeOutput, Compositor, ConvPath};
 pub use layout::{CompositorConfig, CompositorLayout, IN_EPS};
+pub use precision::MapPrecision;

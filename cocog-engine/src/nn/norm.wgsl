@@ -1,5 +1,6 @@
 // ReLU then InstanceNorm (no affine, biased variance, ε 1e-5) over each (image, channel) plane
-// of [image][channel][y][x] maps, and its adjoint. The statistics kernels run one workgroup
+// of [image][channel][y][x] maps, and its adjoint. The pre-activation and normalised output
+// are stored as map_t (the prelude's: f16 or f32); statistics and gradients are f32. The statistics kernels run one workgroup
 // per plane; the element kernels one thread per value.
 
 struct Norm {
@@ -12,9 +13,9 @@ struct Norm {
 
 @group(0) @binding(0) var<uniform> nm: Norm;
 // Pre-activation (the convolution's output).
-@group(0) @binding(1) var<storage, read> z: array<f32>;
+@group(0) @binding(1) var<storage, read> z: array<map_t>;
 // Normalised output.
-@group(0) @binding(2) var<storage, read_write> y: array<f32>;
+@group(0) @binding(2) var<storage, read_write> y: array<map_t>;
 // Per plane: mean, 1/σ.
 @group(0) @binding(3) var<storage, read_write> stats: array<f32>;
 @group(0) @binding(4) var<storage, read> v_y: array<f32>;
@@ -51,12 +52,12 @@ fn norm_stats(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg
     let base = plane * nm.size;
     var s = 0.0;
     for (var j = lid; j < nm.size; j += 256u) {
-        s += max(z[base + j], 0.0);
+        s += max(f32(z[base + j]), 0.0);
     }
     let mean = reduce(lid, vec2<f32>(s, 0.0)).x / f32(nm.size);
     var q = 0.0;
     for (var j = lid; j < nm.size; j += 256u) {
-        let d = max(z[base + j], 0.0) - mean;
+        let d = max(f32(z[base + j]), 0.0) - mean;
         q += d * d;
     }
     let var_ = reduce(lid, vec2<f32>(q, 0.0)).x / f32(nm.size);
@@ -73,7 +74,7 @@ fn norm_apply(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg
         return;
     }
     let plane = t / nm.size;
-    y[t] = (max(z[t], 0.0) - stats[2u * plane]) * stats[2u * plane + 1u];
+    y[t] = map_t((max(f32(z[t]), 0.0) - stats[2u * plane]) * stats[2u * plane + 1u]);
 }
 
 @compute @workgroup_size(256)
@@ -86,7 +87,7 @@ fn norm_grad_stats(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups
     var s = vec2<f32>(0.0);
     for (var j = lid; j < nm.size; j += 256u) {
         let g = v_y[base + j];
-        s += vec2<f32>(g, g * y[base + j]);
+        s += vec2<f32>(g, g * f32(y[base + j]));
     }
     let total = reduce(lid, s) / f32(nm.size);
     if lid == 0u {
@@ -104,8 +105,8 @@ fn norm_backward(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) 
     }
     let plane = t / nm.size;
     var g = 0.0;
-    if z[t] > 0.0 {
-        g = stats[2u * plane + 1u] * (v_y[t] - grad_stats[2u * plane] - y[t] * grad_stats[2u * plane + 1u]);
+    if f32(z[t]) > 0.0 {
+        g = stats[2u * plane + 1u] * (v_y[t] - grad_stats[2u * plane] - f32(y[t]) * grad_stats[2u * plane + 1u]);
     }
     v_z[t] = g;
 }

@@ -241,6 +241,47 @@ pub fn forward(l: &CompositorLayout, p: &[f64], renders: &Maps) -> Trace {
     }
 }
 
+/// F's four stored maps (z1, y1, z2, y2: each layer's pre-activation and normalised output).
+pub type Stored = [Maps; 4];
+
+/// Each stored map computed exactly from the stored map before it in `given` (the renders for
+/// z1): what a GPU's stored maps must round from, layer by layer.
+pub fn stored_from(l: &CompositorLayout, p: &[f64], renders: &Maps, given: &Stored) -> Stored {
+    let [c1, c2, _] = convs(l);
+    [
+        conv(p, c1, renders),
+        relu_norm(&given[0]).0,
+        conv(p, c2, &given[1]),
+        relu_norm(&given[2]).0,
+    ]
+}
+
+/// The trace of a forward that stored `given` (a GPU's maps): the statistics and the head
+/// computed from them, so its backward is the exact adjoint of that GPU's forward.
+pub fn forward_from_stored(
+    l: &CompositorLayout,
+    p: &[f64],
+    renders: &Maps,
+    given: &Stored,
+) -> Trace {
+    let [_, _, head] = convs(l);
+    let [z1, y1, z2, y2] = given.clone();
+    let (r1, r2) = (relu_norm(&z1).1, relu_norm(&z2).1);
+    let logits = conv(p, head, &y2);
+    let (weights, blend) = composite(renders, &logits);
+    Trace {
+        renders: renders.clone(),
+        z1,
+        y1,
+        r1,
+        z2,
+        y2,
+        r2,
+        weights,
+        blend,
+    }
+}
+
 /// Gradients of the renders (through the product only: F's input is detached) and of the
 /// logits, given the composite's.
 pub fn composite_backward(

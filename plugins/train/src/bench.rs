@@ -67,6 +67,8 @@ pub struct BenchReport {
     /// Which gradient-accumulation path the backward used.
     pub float_atomics: bool,
     pub subgroups: bool,
+    /// WGSL f16, in which F stores its forward maps.
+    pub shader_f16: bool,
     pub width: u32,
     pub height: u32,
     pub views: usize,
@@ -377,6 +379,7 @@ fn measure(
         method: if opts.coc.is_some() { "cocog" } else { "3dgs" }.to_owned(),
         float_atomics: gpu.float_atomics,
         subgroups: gpu.subgroups,
+        shader_f16: gpu.shader_f16,
         width,
         height,
         views: views.len(),
@@ -417,9 +420,14 @@ impl BenchReport {
                 cocog_engine::nn::ConvPath::Gemm => "implicit GEMMs",
                 cocog_engine::nn::ConvPath::Tiled => "tiled (COCOG_F_CONV=tiled)",
             };
+            let maps = if self.shader_f16 {
+                "f16 maps"
+            } else {
+                "f32 maps"
+            };
             out += &format!(
                 "compositor F     {share:.0}% of the profiled step; {g:.2} GFLOP/iteration in its \
-                 convolutions (forward + backward; {path}), {rate:.2} GFLOP/s over the \
+                 convolutions (forward + backward; {path}, {maps}), {rate:.2} GFLOP/s over the \
                  compositor phase\n"
             );
         }
@@ -442,7 +450,7 @@ impl BenchReport {
             .peak_host_bytes
             .map_or("unknown".to_owned(), |b| format!("{:.0} MiB", mib(b)));
         format!(
-            "adapter          {} (float atomics: {}, subgroups: {})\n\
+            "adapter          {} (float atomics: {}, subgroups: {}, f16: {})\n\
              source           {}\n\
              images           {} views at {}×{}{}\n\
              Gaussians        {} → {} (from iteration {})\n\
@@ -455,6 +463,7 @@ impl BenchReport {
             self.adapter,
             yes_no(self.float_atomics),
             yes_no(self.subgroups),
+            yes_no(self.shader_f16),
             self.source,
             self.views,
             self.width,
