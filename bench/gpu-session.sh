@@ -12,8 +12,9 @@
 #   step            #12's step ratio: a 5000-iteration 3dgs run on dev-table at 100×75 gives the
 #                   Gaussians, then `cocog bench --resume` times a 3dgs step and a cocog step
 #                   (the default variant, F on) on them, the latter with F's convolutions as
-#                   implicit GEMMs and as tiled kernels (COCOG_F_CONV=tiled), with the
-#                   per-kernel split (--kernels)                                         ~80 s
+#                   implicit GEMMs and as tiled kernels (COCOG_F_CONV=tiled), and with F's maps
+#                   in f32 (COCOG_NO_F16=1) as well as f16, with the per-kernel split
+#                   (--kernels)                                                          ~95 s
 #   peer-synthetic  #11: `cocog bench --synthetic 1000000 --size 1920x1080`, then gsplat on the
 #                   same Gaussians and cameras (peer_gsplat.py workload)          ~40 s + gsplat build
 #   peer-train      #11: sharp-dev at 400×300, 30000 iterations: `cocog train --method 3dgs`
@@ -83,10 +84,14 @@ phase_step() {
     local model="$work/step-model"
     bounded 120 "$cocog" train "$work/in-dev-table" -o "$model" --downscale 4 --method 3dgs \
         --iterations 5000 --checkpoint-every 0 -q --force >>"$log" 2>&1
-    for m in 3dgs cocog cocog-tiled; do
+    local m vars
+    for m in 3dgs cocog cocog-tiled cocog-f32; do
         echo "-- $m step on the model's Gaussians" >>"$log"
-        COCOG_F_CONV="${m#cocog-}" bounded 60 "$cocog" bench "$work/in-dev-table" --downscale 4 \
-            --resume "$model" --method "${m%-tiled}" --iterations 100 --warmup 10 --kernels \
+        vars=(COCOG_F_CONV=gemm)
+        [[ $m == *-tiled ]] && vars=(COCOG_F_CONV=tiled)
+        [[ $m == *-f32 ]] && vars+=(COCOG_NO_F16=1)
+        bounded 60 env "${vars[@]}" "$cocog" bench "$work/in-dev-table" --downscale 4 \
+            --resume "$model" --method "${m%%-*}" --iterations 100 --warmup 10 --kernels \
             >>"$log" 2>&1
     done
 }
@@ -139,7 +144,7 @@ while ((i < ${#phases[@]})); do
     p="${phases[i]}"
     i=$((i + 1))
     case "$p" in
-        step) run_phase step 110 ;;
+        step) run_phase step 130 ;;
         peer-synthetic) run_phase peer-synthetic 150 ;;
         peer-train) run_phase peer-train 450 ;;
         idle-bench) run_phase idle-bench 120 ;;
