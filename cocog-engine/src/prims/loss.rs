@@ -10,7 +10,7 @@ struct Params {
     width: u32,
     height: u32,
     num_images: u32,
-    count: u32,
+    pad: u32,
     lambda: f32,
     inv_n: f32,
     row0: i32,
@@ -22,23 +22,22 @@ struct Params {
     weights: [f32; 12],
 }
 
-/// Rows each side of a band that its two stacked 11-tap blurs read.
-const HALO: u32 = 10;
-const MAX_GRID_X: u32 = 65_535;
+/// Rows each side of the scored ones whose SSIM terms their gradient's blur reads.
+const HALO: u32 = 5;
+/// A tile of loss.wgsl's passes: columns × rows.
+const TILE: (u32, u32) = (16, 8);
 
 #[derive(Debug)]
 pub struct ImageLoss {
-    moments_h: Kernel,
-    blur_h: Kernel,
-    blur_v: Kernel,
-    terms: Kernel,
-    grad: Kernel,
+    forward: Kernel,
+    backward: Kernel,
     /// Largest buffer binding to plan for; the device's limit unless a test lowers it.
     binding_limit: Option<u64>,
 }
 
 /// One pass of the loss over scratch rows `row0..row0 + rows` of `num_images` images
-/// starting at pixel `pixel0`, scoring rows `out.0..out.1`.
+/// starting at pixel `pixel0`, scoring rows `out.0..out.1` (within the scratch's rows, which
+/// hold `HALO` more each side where the image has them).
 struct Band {
     row0: i32,
     rows: u32,
@@ -55,10 +54,25 @@ pub struct LossRows {
     pub frame_pixels: u64,
 }
 
-/// Workgroups a 1D dispatch of `groups` launches (a 2D grid past the x limit).
-fn launched(groups: u32) -> u32 {
-    let x = groups.clamp(1, MAX_GRID_X);
-    x * groups.div_ceil(x)
+impl Band {
+    /// The forward's tiles: columns, scratch rows, images. It writes one partial sum each.
+    fn forward_grid(&self, width: u32) -> [u32; 3] {
+        [
+            width.div_ceil(TILE.0),
+            self.rows.div_ceil(TILE.1),
+            self.num_images,
+        ]
+    }
+
+    /// The backward's tiles, over the scored rows.
+    fn backward_grid(&self, width: u32) -> [u32; 3] {
+        let scored = (self.out.1 - self.out.0).max(0) as u32;
+        [
+            width.div_ceil(TILE.0),
+            scored.div_ceil(TILE.1),
+            self.num_images,
+        ]
+    }
 }
 
 /// The loss gradient (ready to pass to `Renderer::backward` as `v_rgba`) and the per-workgroup
@@ -67,7 +81,7 @@ fn launched(groups: u32) -> u32 {
 pub struct LossOutput {
     /// ∂loss/∂pred per pixel, alpha component zero.
     pub v_pred: GpuBuffer,
-    /// Per workgroup of 256 pixels: (Σ|pred − target|, Σ SSIM, Σ (clamp(pred) − target)², 0)
+    /// Per 16×8 tile: (Σ|pred − target|, Σ SSIM, Σ (clamp(pred) − target)², 0)
     /// over pixels and channels.
     pub partials: GpuBuffer,
     pub num_groups: usize,
@@ -125,10 +139,10 @@ impl LossOutput {
 
 impl ImageLoss {
     /// Bytes of the largest scratch buffer one binding of `compute` covers when the whole
-    /// batch is one pass, for `pixels` pixels over all images: the SSIM moments, five rgba
+    /// batch is one pass, for `pixels` pixels over all images: the SSIM terms, three rgba
     /// planes per pixel. Past the binding limit `compute` works in bands of rows instead.
     pub fn largest_binding(pixels: u64) -> u64 {
-        5 * 16 * pixels
+        3 * 16 * pixels
     }
 
     /// Plans for at most `bytes` per buffer binding instead of the device's limit (tests of
@@ -154,7 +168,7 @@ impl ImageLoss {
     fn slots_of(bands: &[Band], width: u32) -> u32 {
         bands
             .iter()
-            .map(|b| launched((width * b.rows * b.num_images).div_ceil(256)))
+            .map(|b| b.forward_grid(width).iter().product::<u32>())
             .sum()
     }
 
@@ -180,11 +194,17 @@ impl ImageLoss {
         num_images: u32,
         out: (u32, u32),
     ) -> Vec<Band> {
-        let pixels = u64::from(width) * u64::from(height) * u64::from(num_images);
+        // The scratch rows of scored rows y0..y1: HALO more each side, within the image.
+        let scratch = move |y0: u32, y1: u32| {
+            let row0 = y0.saturating_sub(HALO);
+            (row0 as i32, (y1 + HALO).min(height) - row0)
+        };
+        let (row0, rows) = scratch(out.0, out.1);
+        let pixels = u64::from(width) * u64::from(rows) * u64::from(num_images);
         if Self::largest_binding(pixels) <= limit {
             return vec![Band {
-                row0: 0,
-                rows: height,
+                row0,
+                rows,
                 out: (out.0 as i32, out.1 as i32),
                 num_images,
                 pixel0: 0,
@@ -194,12 +214,16 @@ impl ImageLoss {
         let band = (rows_fit.saturating_sub(u64::from(2 * HALO)) as u32).clamp(1, height);
         (0..num_images)
             .flat_map(|image| {
-                (out.0..out.1).step_by(band as usize).map(move |y0| Band {
-                    row0: y0 as i32 - HALO as i32,
-                    rows: band + 2 * HALO,
-                    out: (y0 as i32, (y0 + band).min(out.1) as i32),
-                    num_images: 1,
-                    pixel0: image * width * height,
+                (out.0..out.1).step_by(band as usize).map(move |y0| {
+                    let y1 = (y0 + band).min(out.1);
+                    let (row0, rows) = scratch(y0, y1);
+                    Band {
+                        row0,
+                        rows,
+                        out: (y0 as i32, y1 as i32),
+                        num_images: 1,
+                        pixel0: image * width * height,
+                    }
                 })
             })
             .collect()
@@ -208,11 +232,8 @@ impl ImageLoss {
     pub fn new(ctx: &GpuContext) -> Self {
         let module = shader(ctx, "loss", include_str!("loss.wgsl"));
         Self {
-            moments_h: Kernel::new(ctx, &module, "moments_h"),
-            blur_h: Kernel::new(ctx, &module, "blur_h"),
-            blur_v: Kernel::new(ctx, &module, "blur_v"),
-            terms: Kernel::new(ctx, &module, "ssim_terms"),
-            grad: Kernel::new(ctx, &module, "ssim_grad"),
+            forward: Kernel::new(ctx, &module, "ssim_forward"),
+            backward: Kernel::new(ctx, &module, "ssim_backward"),
             binding_limit: None,
         }
     }
@@ -266,25 +287,20 @@ impl ImageLoss {
         let scratch_px = |b: &Band| width * b.rows * b.num_images;
         let largest = bands.iter().map(scratch_px).max().unwrap_or(0);
         let slots = Self::slots_of(&bands, width);
-        let px = u64::from(largest) * 16;
-        // The SSIM terms reuse the moments' scratch once the moments are consumed.
-        let tmp = ws.buffer(ctx, "ssim tmp", 5 * px);
-        let moments = ws.buffer(ctx, "ssim moments", 5 * px);
+        let terms = ws.buffer(ctx, "ssim terms", 3 * 16 * u64::from(largest));
         let partials = ws.buffer(ctx, "loss partials", u64::from(slots) * 16);
         let v_pred = if rows.out == (0, height) {
             ws.buffer(ctx, "v_pred", u64::from(pixels) * 16)
         } else {
             ws.zeroed(rec, "v_pred", u64::from(pixels) * 16)
         };
-        let terms = ws.buffer(ctx, "ssim terms", 3 * px);
         let mut partial0 = 0;
         for band in &bands {
-            let groups = scratch_px(band).div_ceil(256);
-            let params = |count: u32| Params {
+            let u = rec.uniform(&Params {
                 width,
                 height,
                 num_images: band.num_images,
-                count,
+                pad: 0,
                 lambda,
                 inv_n: inv_n as f32,
                 row0: band.row0,
@@ -294,34 +310,15 @@ impl ImageLoss {
                 pixel0: band.pixel0,
                 partial0,
                 weights: std::array::from_fn(|i| taps.get(i).map_or(0.0, |&w| w as f32)),
-            };
-            let (p5, p3) = (rec.uniform(&params(5)), rec.uniform(&params(3)));
-            self.moments_h
-                .dispatch_1d(rec, &[(0, &p5), (1, pred), (2, target), (4, &tmp)], groups);
-            self.blur_v
-                .dispatch_1d(rec, &[(0, &p5), (3, &tmp), (4, &moments)], groups);
-            self.terms.dispatch_1d(
-                rec,
-                &[
-                    (0, &p5),
-                    (1, pred),
-                    (2, target),
-                    (3, &moments),
-                    (4, &terms),
-                    (5, &partials),
-                ],
-                groups,
-            );
-            self.blur_h
-                .dispatch_1d(rec, &[(0, &p3), (3, &terms), (4, &tmp)], groups);
-            self.blur_v
-                .dispatch_1d(rec, &[(0, &p3), (3, &tmp), (4, &terms)], groups);
-            self.grad.dispatch_1d(
-                rec,
-                &[(0, &p3), (1, pred), (2, target), (3, &terms), (4, &v_pred)],
-                groups,
-            );
-            partial0 += launched(groups);
+            });
+            let shared: [(u32, &dyn Bind); 4] = [(0, &u), (1, pred), (2, target), (3, &terms)];
+            let forward = [shared.as_slice(), &[(5, &partials)]].concat();
+            let backward = [shared.as_slice(), &[(4, &v_pred)]].concat();
+            self.forward
+                .dispatch(rec, &forward, band.forward_grid(width));
+            self.backward
+                .dispatch(rec, &backward, band.backward_grid(width));
+            partial0 += band.forward_grid(width).iter().product::<u32>();
         }
         LossOutput {
             v_pred,

@@ -1,21 +1,24 @@
-// Training loss (1 − λ)·L1 + λ·(1 − SSIM) over a batch of rgba images (alpha ignored) and
-// its gradient. SSIM statistics come from a separable, zero-padded 11-tap Gaussian blur of
-// (x, y, x², y², xy); the gradient blurs the per-pixel partials (A, B, C) once more, since
-// the symmetric window makes the blur its own adjoint:
+// Training loss (1 − λ)·L1 + λ·(1 − SSIM) over a batch of rgba images (alpha ignored) and its
+// gradient, in two fused passes over 16×16 tiles of pixels. SSIM's statistics are a separable,
+// zero-padded 11-tap Gaussian blur of (x, y, x², y², xy); the gradient blurs the per-pixel
+// partials (A, B, C) once more, since the symmetric window makes the blur its own adjoint:
 //   ∂SSIM/∂x = G∗A + 2x·(G∗B) + y·(G∗C).
+// ssim_forward blurs a tile's moments (with its 5-row halo) along rows into workgroup memory,
+// then along columns, and writes (A, B, C) and the loss's sums; ssim_backward blurs (A, B, C)
+// the same way and writes the gradient. SSIM needs E[x²] and E[y²] only as their sum, so the
+// forward keeps four moments per channel, and a 16×8 tile's twelve (or the backward's nine)
+// fit the 16 KiB of workgroup memory every adapter has: one barrier between the two blurs.
 //
-// The scratch planes cover `rows` image rows from `row0` (possibly outside the image) of
-// `num_images` images: all rows of all images at once, or, where that would exceed a buffer
-// binding, one band of one image with a 10-row halo each side (the two stacked blurs each
-// reach 5 rows). Rows of the scratch outside the image stay zero; only rows `out0..out1`
-// count towards the loss and get a gradient.
+// The terms scratch covers `rows` image rows from `row0` of `num_images` images: every row the
+// gradient of a scored row (`out0..out1`) reads, i.e. 5 beyond them each side within the image.
+// Where the scratch of a whole batch would exceed a buffer binding, the host runs one band of
+// one image at a time.
 
 struct Params {
     width: u32,
     height: u32,
     num_images: u32,
-    // vec4 planes per pixel in `src`/`dst` for the generic blurs.
-    count: u32,
+    pad: u32,
     lambda: f32,
     inv_n: f32,
     row0: i32,
@@ -32,186 +35,219 @@ struct Params {
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> pred: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read> gt: array<vec4<f32>>;
-@group(0) @binding(3) var<storage, read> src: array<vec4<f32>>;
-@group(0) @binding(4) var<storage, read_write> dst: array<vec4<f32>>;
+// Per scratch pixel: A, B, C (xyz: the channels).
+@group(0) @binding(3) var<storage, read_write> terms: array<vec4<f32>>;
+@group(0) @binding(4) var<storage, read_write> v_pred: array<vec4<f32>>;
 @group(0) @binding(5) var<storage, read_write> partials: array<vec4<f32>>;
 
 const C1: f32 = 0.0001;
 const C2: f32 = 0.0009;
 const RADIUS: i32 = 5;
+// A tile: TW columns × TH rows, one thread per pixel; its rows with the halo.
+const TW: u32 = 16u;
+const TH: u32 = 8u;
+const HR: u32 = 18u;
+// Row-blurred values per channel and (halo row, column): the forward's four moments, the
+// backward's three terms.
+const HALF: u32 = 288u;
 
-var<workgroup> reduce: array<vec4<f32>, 256>;
+// forward: [channel][moment][halo row][column], then the loss sums' reduction.
+// backward: [channel][term][halo row][column].
+var<workgroup> wa: array<f32, 3456>;
 
 fn tap(i: i32) -> f32 {
     let k = u32(i + RADIUS);
     return params.weights[k / 4u][k % 4u];
 }
 
-fn pixel_id(gid: vec3<u32>, nwg: vec3<u32>) -> u32 {
-    return gid.x + gid.y * nwg.x * 256u;
+fn in_image(r: i32, c: i32) -> bool {
+    return r >= 0 && c >= 0 && r < i32(params.height) && c < i32(params.width);
 }
 
-fn num_pixels() -> u32 {
-    return params.width * params.rows * params.num_images;
-}
-
-// Row of scratch pixel `s` within the scratch, and within its image.
-fn local_row(s: u32) -> i32 {
-    return i32((s / params.width) % params.rows);
-}
-
-fn image_row(s: u32) -> i32 {
-    return params.row0 + local_row(s);
-}
-
-fn in_image(s: u32) -> bool {
-    let r = image_row(s);
-    return r >= 0 && r < i32(params.height);
-}
-
-fn counted(s: u32) -> bool {
-    let r = image_row(s);
+fn scored(r: i32) -> bool {
     return r >= params.out0 && r < params.out1 && r < i32(params.height);
 }
 
-// Index in `pred`, `gt` and the gradient of scratch pixel `s` (a row inside the image).
-fn image_pixel(s: u32) -> u32 {
-    let image = s / (params.width * params.rows);
-    return params.pixel0 + (image * params.height + u32(image_row(s))) * params.width
-        + s % params.width;
+// Index in `pred`, `gt` and the gradient of image b's pixel (r, c).
+fn image_pixel(b: u32, r: i32, c: i32) -> u32 {
+    return params.pixel0 + (b * params.height + u32(r)) * params.width + u32(c);
 }
 
-@compute @workgroup_size(256)
-fn moments_h(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
-    let pix = pixel_id(gid, nwg);
-    if (pix >= num_pixels()) {
-        return;
-    }
-    var m: array<vec3<f32>, 5>;
-    if (!in_image(pix)) {
-        for (var k = 0u; k < 5u; k++) {
-            dst[5u * pix + k] = vec4<f32>(0.0);
-        }
-        return;
-    }
-    let x0 = i32(pix % params.width);
-    let row = image_pixel(pix) - u32(x0);
-    for (var i = -RADIUS; i <= RADIUS; i++) {
-        let x = x0 + i;
-        if (x < 0 || x >= i32(params.width)) {
-            continue;
-        }
-        let w = tap(i);
-        let a = pred[row + u32(x)].xyz;
-        let b = gt[row + u32(x)].xyz;
-        m[0] += w * a;
-        m[1] += w * b;
-        m[2] += w * a * a;
-        m[3] += w * b * b;
-        m[4] += w * a * b;
-    }
-    for (var k = 0u; k < 5u; k++) {
-        dst[5u * pix + k] = vec4<f32>(m[k], 0.0);
-    }
+// Index of the terms of image b's pixel (r, c), a row of the scratch.
+fn scratch_pixel(b: u32, r: i32, c: i32) -> u32 {
+    return (b * params.rows + u32(r - params.row0)) * params.width + u32(c);
 }
 
-// Zero padding at the image's edges (`pos` of `extent`); taps that would leave the scratch
-// (`local` of `local_extent`, a band's halo) are skipped: those rows are not used.
-fn blur(pix: u32, step: i32, pos: i32, extent: i32, local: i32, local_extent: i32) {
-    for (var k = 0u; k < params.count; k++) {
-        var acc = vec4<f32>(0.0);
-        for (var i = -RADIUS; i <= RADIUS; i++) {
-            let p = pos + i;
-            let l = local + i;
-            if (p >= 0 && p < extent && l >= 0 && l < local_extent) {
-                acc += tap(i) * src[u32(i32(pix) + i * step) * params.count + k];
+fn in_scratch(r: i32) -> bool {
+    return r >= params.row0 && r < params.row0 + i32(params.rows);
+}
+
+@compute @workgroup_size(16, 8)
+fn ssim_forward(
+    @builtin(workgroup_id) wg: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+    @builtin(local_invocation_id) l: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
+    let b = wg.z;
+    let c0 = i32(wg.x * TW);
+    let r0 = params.row0 + i32(wg.y * TH);
+    let col = c0 + i32(l.x);
+    let row = r0 + i32(l.y);
+    // Along rows: (μx, μy, E[x² + y²], E[xy]) per channel at each halo row and column.
+    for (var e = lid; e < HALF; e += TW * TH) {
+        let r = r0 - RADIUS + i32(e / TW);
+        let c = c0 + i32(e % TW);
+        var mx = vec3<f32>(0.0);
+        var my = vec3<f32>(0.0);
+        var sq = vec3<f32>(0.0);
+        var xy = vec3<f32>(0.0);
+        if r >= 0 && r < i32(params.height) {
+            for (var i = -RADIUS; i <= RADIUS; i++) {
+                if in_image(r, c + i) {
+                    let at = image_pixel(b, r, c + i);
+                    let x = pred[at].xyz;
+                    let y = gt[at].xyz;
+                    let w = tap(i);
+                    mx += w * x;
+                    my += w * y;
+                    sq += w * (x * x + y * y);
+                    xy += w * x * y;
+                }
             }
         }
-        dst[pix * params.count + k] = acc;
-    }
-}
-
-@compute @workgroup_size(256)
-fn blur_h(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
-    let pix = pixel_id(gid, nwg);
-    if (pix < num_pixels()) {
-        let x = i32(pix % params.width);
-        blur(pix, 1, x, i32(params.width), x, i32(params.width));
-    }
-}
-
-@compute @workgroup_size(256)
-fn blur_v(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
-    let pix = pixel_id(gid, nwg);
-    if (pix < num_pixels()) {
-        blur(pix, i32(params.width), image_row(pix), i32(params.height), local_row(pix),
-            i32(params.rows));
-    }
-}
-
-@compute @workgroup_size(256)
-fn ssim_terms(
-    @builtin(global_invocation_id) gid: vec3<u32>,
-    @builtin(num_workgroups) nwg: vec3<u32>,
-    @builtin(local_invocation_index) tid: u32,
-    @builtin(workgroup_id) wid: vec3<u32>,
-) {
-    let pix = pixel_id(gid, nwg);
-    // (L1, SSIM, squared error of the prediction clamped to [0, 1] as a saved image is —
-    // what PSNR needs —, 0), summed over channels.
-    var sums = vec4<f32>(0.0);
-    if (pix < num_pixels() && !in_image(pix)) {
         for (var k = 0u; k < 3u; k++) {
-            dst[3u * pix + k] = vec4<f32>(0.0);
+            let base = 4u * k * HALF + e;
+            wa[base] = mx[k];
+            wa[base + HALF] = my[k];
+            wa[base + 2u * HALF] = sq[k];
+            wa[base + 3u * HALF] = xy[k];
         }
-    } else if (pix < num_pixels()) {
-        let mx = src[5u * pix].xyz;
-        let my = src[5u * pix + 1u].xyz;
-        let vx = src[5u * pix + 2u].xyz - mx * mx;
-        let vy = src[5u * pix + 3u].xyz - my * my;
-        let cxy = src[5u * pix + 4u].xyz - mx * my;
+    }
+    workgroupBarrier();
+    // Along columns, then SSIM and its partials in (μx, σx², σxy), re-expressed in
+    // (μx, E[x²], E[xy]).
+    var ssim = vec3<f32>(0.0);
+    var s_mu = vec3<f32>(0.0);
+    var s_var = vec3<f32>(0.0);
+    var s_cov = vec3<f32>(0.0);
+    for (var k = 0u; k < 3u; k++) {
+        var m = vec4<f32>(0.0);
+        for (var j = 0u; j < 11u; j++) {
+            let at = 4u * k * HALF + (l.y + j) * TW + l.x;
+            m += tap(i32(j) - RADIUS)
+                * vec4<f32>(wa[at], wa[at + HALF], wa[at + 2u * HALF], wa[at + 3u * HALF]);
+        }
+        let mx = m.x;
+        let my = m.y;
+        let cxy = m.w - mx * my;
         let n1 = 2.0 * mx * my + C1;
         let n2 = 2.0 * cxy + C2;
         let d1 = mx * mx + my * my + C1;
-        let d2 = vx + vy + C2;
+        let d2 = m.z - mx * mx - my * my + C2;
         let s = n1 * n2 / (d1 * d2);
-        // Partials in (μx, σx², σxy), re-expressed in (μx, E[x²], E[xy]).
-        let s_mu = 2.0 * my * n2 / (d1 * d2) - s * 2.0 * mx / d1;
-        let s_var = -s / d2;
-        let s_cov = 2.0 * n1 / (d1 * d2);
-        dst[3u * pix] = vec4<f32>(s_mu - 2.0 * mx * s_var - my * s_cov, 0.0);
-        dst[3u * pix + 1u] = vec4<f32>(s_var, 0.0);
-        dst[3u * pix + 2u] = vec4<f32>(s_cov, 0.0);
-        if (counted(pix)) {
-            let at = image_pixel(pix);
+        ssim[k] = s;
+        let p_mu = 2.0 * my * n2 / (d1 * d2) - s * 2.0 * mx / d1;
+        let p_var = -s / d2;
+        let p_cov = 2.0 * n1 / (d1 * d2);
+        s_mu[k] = p_mu - 2.0 * mx * p_var - my * p_cov;
+        s_var[k] = p_var;
+        s_cov[k] = p_cov;
+    }
+    // (L1, SSIM, squared error of the prediction clamped to [0, 1] as a saved image is — what
+    // PSNR needs —, 0), summed over channels.
+    var sums = vec4<f32>(0.0);
+    if in_image(row, col) && in_scratch(row) {
+        let t = 3u * scratch_pixel(b, row, col);
+        terms[t] = vec4<f32>(s_mu, 0.0);
+        terms[t + 1u] = vec4<f32>(s_var, 0.0);
+        terms[t + 2u] = vec4<f32>(s_cov, 0.0);
+        if scored(row) {
+            let at = image_pixel(b, row, col);
             let diff = abs(pred[at].xyz - gt[at].xyz);
             let e = clamp(pred[at].xyz, vec3<f32>(0.0), vec3<f32>(1.0)) - gt[at].xyz;
-            sums = vec4<f32>(diff.x + diff.y + diff.z, s.x + s.y + s.z, dot(e, e), 0.0);
+            sums = vec4<f32>(diff.x + diff.y + diff.z, ssim.x + ssim.y + ssim.z, dot(e, e), 0.0);
         }
     }
-    reduce[tid] = sums;
+    // The tile's sums: 16 threads add 8 each, then one adds those 16, in a fixed order.
     workgroupBarrier();
-    for (var off = 128u; off > 0u; off >>= 1u) {
-        if (tid < off) {
-            reduce[tid] += reduce[tid + off];
-        }
-        workgroupBarrier();
+    for (var q = 0u; q < 4u; q++) {
+        wa[q * 128u + lid] = sums[q];
     }
-    if (tid == 0u) {
-        partials[params.partial0 + wid.x + wid.y * nwg.x] = reduce[0];
+    workgroupBarrier();
+    if lid < 16u {
+        var part = vec4<f32>(0.0);
+        for (var i = 0u; i < 8u; i++) {
+            let at = lid * 8u + i;
+            part += vec4<f32>(wa[at], wa[128u + at], wa[256u + at], wa[384u + at]);
+        }
+        for (var q = 0u; q < 4u; q++) {
+            wa[512u + q * 16u + lid] = part[q];
+        }
+    }
+    workgroupBarrier();
+    if lid == 0u {
+        var total = vec4<f32>(0.0);
+        for (var i = 0u; i < 16u; i++) {
+            total += vec4<f32>(wa[512u + i], wa[528u + i], wa[544u + i], wa[560u + i]);
+        }
+        let slot = wg.x + nwg.x * (wg.y + nwg.y * wg.z);
+        partials[params.partial0 + slot] = total;
     }
 }
 
-@compute @workgroup_size(256)
-fn ssim_grad(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
-    let pix = pixel_id(gid, nwg);
-    if (pix >= num_pixels() || !counted(pix)) {
+// Tiles over the scored rows.
+@compute @workgroup_size(16, 8)
+fn ssim_backward(
+    @builtin(workgroup_id) wg: vec3<u32>,
+    @builtin(local_invocation_id) l: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
+    let b = wg.z;
+    let c0 = i32(wg.x * TW);
+    let r0 = params.out0 + i32(wg.y * TH);
+    let col = c0 + i32(l.x);
+    let row = r0 + i32(l.y);
+    for (var e = lid; e < HALF; e += TW * TH) {
+        let r = r0 - RADIUS + i32(e / TW);
+        let c = c0 + i32(e % TW);
+        var g0 = vec3<f32>(0.0);
+        var g1 = vec3<f32>(0.0);
+        var g2 = vec3<f32>(0.0);
+        if r >= 0 && r < i32(params.height) && in_scratch(r) {
+            for (var i = -RADIUS; i <= RADIUS; i++) {
+                if in_image(r, c + i) {
+                    let t = 3u * scratch_pixel(b, r, c + i);
+                    let w = tap(i);
+                    g0 += w * terms[t].xyz;
+                    g1 += w * terms[t + 1u].xyz;
+                    g2 += w * terms[t + 2u].xyz;
+                }
+            }
+        }
+        for (var k = 0u; k < 3u; k++) {
+            let base = 3u * k * HALF + e;
+            wa[base] = g0[k];
+            wa[base + HALF] = g1[k];
+            wa[base + 2u * HALF] = g2[k];
+        }
+    }
+    workgroupBarrier();
+    if !in_image(row, col) || !scored(row) {
         return;
     }
-    let at = image_pixel(pix);
+    let at = image_pixel(b, row, col);
     let x = pred[at].xyz;
     let y = gt[at].xyz;
-    let d_ssim = src[3u * pix].xyz + 2.0 * x * src[3u * pix + 1u].xyz + y * src[3u * pix + 2u].xyz;
+    var d_ssim = vec3<f32>(0.0);
+    for (var k = 0u; k < 3u; k++) {
+        var g = vec3<f32>(0.0);
+        for (var j = 0u; j < 11u; j++) {
+            let t = 3u * k * HALF + (l.y + j) * TW + l.x;
+            g += tap(i32(j) - RADIUS) * vec3<f32>(wa[t], wa[t + HALF], wa[t + 2u * HALF]);
+        }
+        d_ssim[k] = g.x + 2.0 * x[k] * g.y + y[k] * g.z;
+    }
     let l1 = sign(x - y);
-    dst[at] = vec4<f32>(((1.0 - params.lambda) * l1 - params.lambda * d_ssim) * params.inv_n, 0.0);
+    v_pred[at] = vec4<f32>(((1.0 - params.lambda) * l1 - params.lambda * d_ssim) * params.inv_n, 0.0);
 }
