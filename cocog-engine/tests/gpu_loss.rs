@@ -2,8 +2,9 @@
 //! reference_loss_fd.rs), and its PSNR partial sums against a plain f64 PSNR, on a batch of
 //! two odd-sized images with predictions outside [0, 1] (which the PSNR clamps); in one pass,
 //! and in bands of rows as images too large for one buffer binding are done (a binding limit
-//! lowered to force 5-row and 1-row bands, halos and image edges inside bands included); and a
-//! frame scored band by band, as the trainer trains photos larger than a binding.
+//! lowered to force 5-row and 1-row bands, halos and image edges inside bands included); on
+//! dark, nearly flat images, where SSIM's constants dominate; and a frame scored band by band,
+//! as the trainer trains photos larger than a binding.
 
 mod common;
 
@@ -25,6 +26,32 @@ fn gpu_loss_matches_reference() {
         .iter()
         .map(|p| std::array::from_fn(|k| (p[k] * 0.7 + rng.range_f32(0.0, 0.3)).min(1.0)))
         .collect();
+    compare_with_reference(ctx, &pred, &target, (w, h, images));
+}
+
+/// Dark, nearly flat images, where SSIM's constants C1 and C2 outweigh the means and variances
+/// they stabilise: a wrong constant would pass the test above but not this one.
+#[test]
+fn gpu_loss_of_dark_flat_images_matches_reference() {
+    let Some(ctx) = gpu() else { return };
+    let (w, h, images) = (21usize, 13usize, 1usize);
+    let mut rng = Rng::new(14);
+    let pred: Vec<[f32; 4]> = (0..w * h)
+        .map(|_| std::array::from_fn(|_| 0.01 + rng.range_f32(0.0, 0.004)))
+        .collect();
+    let target: Vec<[f32; 4]> = (0..w * h)
+        .map(|_| std::array::from_fn(|_| 0.012 + rng.range_f32(0.0, 0.004)))
+        .collect();
+    compare_with_reference(ctx, &pred, &target, (w, h, images));
+}
+
+fn compare_with_reference(
+    ctx: &cocog_engine::GpuContext,
+    pred: &[[f32; 4]],
+    target: &[[f32; 4]],
+    (w, h, images): (usize, usize, usize),
+) {
+    let npix = w * h * images;
     // Bytes of one row of SSIM terms: a limit of 15 rows leaves 5-row bands (and their 5-row
     // halos), 11 rows 1-row.
     let row = ImageLoss::largest_binding(w as u64);
@@ -44,8 +71,8 @@ fn gpu_loss_matches_reference() {
         let out = loss.compute(
             &mut rec,
             &mut Workspace::default(),
-            &ctx.storage_from("pred", &pred),
-            &ctx.storage_from("target", &target),
+            &ctx.storage_from("pred", pred),
+            &ctx.storage_from("target", target),
             w as u32,
             h as u32,
             images as u32,
@@ -60,7 +87,7 @@ fn gpu_loss_matches_reference() {
         assert!((value.loss - gpu_loss).abs() < 1e-12);
         let sq: f64 = pred
             .iter()
-            .zip(&target)
+            .zip(target)
             .flat_map(|(p, t)| (0..3).map(move |k| f64::from(p[k].clamp(0.0, 1.0) - t[k])))
             .map(|d| d * d)
             .sum();
@@ -80,7 +107,7 @@ fn gpu_loss_matches_reference() {
                     .map(|p| [p[0], p[1], p[2]].map(f64::from))
                     .collect()
             };
-            let (l, g) = image_loss(&rgb(&pred), &rgb(&target), w, h, f64::from(lambda));
+            let (l, g) = image_loss(&rgb(pred), &rgb(target), w, h, f64::from(lambda));
             ref_loss += l / images as f64;
             ref_grad.extend(g.into_iter().map(|g| g.map(|v| v / images as f64)));
         }
