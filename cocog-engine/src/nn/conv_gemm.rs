@@ -62,7 +62,7 @@ fn load_b(b: u32, k: u32, n: u32) -> f32 {
 fn epilogue(b: u32, m: u32, n: u32, v: f32) {
     var bias = 0.0;
     if gemm.u5 != 0xffffffffu { bias = params[gemm.u5 + m]; }
-    output[(b * gemm.m + m) * conv_pixels() + n] = map_t(v + bias);
+    output[(b * gemm.m + m) * conv_pixels() + n] = to_map(v + bias);
 }
 ";
 

@@ -43,8 +43,10 @@ impl ConvTile {
         // must fit the 16 KiB of workgroup memory every adapter has.
         let kernel = |ks: u32, cc: u32, input: &str, output: &str| {
             let label = format!("conv tile {ks}×{ks} {input}→{output}");
+            let convert = if output == "map_t" { "to_map(v)" } else { "v" };
             let source = format!(
                 "{}alias in_t = {input};\nalias out_t = {output};\n\
+                 fn to_out(v: f32) -> out_t {{ return {convert}; }}\n\
                  const KS: u32 = {ks}u;\nconst CC: u32 = {cc}u;\n{}",
                 precision.prelude(),
                 include_str!("conv_tile.wgsl")

@@ -8,8 +8,8 @@
 //
 // The same kernel computes the input gradient of a convolution: the gradient is the
 // convolution of the output gradient with the kernel transposed (in ↔ out) and flipped
-// (TRANSPOSED). The prelude defines KS (3 or 5), CC, and the element types in_t and out_t of
-// the input and output (f32, or map_t for F's stored maps).
+// (TRANSPOSED). The prelude defines KS (3 or 5), CC, the element types in_t and out_t of the
+// input and output (f32, or map_t for F's stored maps), and to_out, the output's conversion.
 //
 // Maps are [image][channel][y][x]; with rgba_input the input is the renders' [image][y][x][4].
 
@@ -139,7 +139,7 @@ fn conv_tile(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_ind
         for (var j = 0u; j < RUN; j++) {
             let x = x0 + col + j;
             if x < cv.width {
-                output[out_row + x] = out_t(acc[j][i] + bias);
+                output[out_row + x] = to_out(acc[j][i] + bias);
             }
         }
     }

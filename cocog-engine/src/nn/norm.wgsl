@@ -74,7 +74,7 @@ fn norm_apply(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg
         return;
     }
     let plane = t / nm.size;
-    y[t] = map_t((max(f32(z[t]), 0.0) - stats[2u * plane]) * stats[2u * plane + 1u]);
+    y[t] = to_map((max(f32(z[t]), 0.0) - stats[2u * plane]) * stats[2u * plane + 1u]);
 }
 
 @compute @workgroup_size(256)

@@ -31,11 +31,16 @@ impl MapPrecision {
     }
 
     /// WGSL declaring `map_t`, the element type of the stored maps; kernels read them through
-    /// `f32(…)` and write them through `map_t(…)`.
+    /// `f32(…)` and write them through `to_map(…)`, which saturates at f16's largest finite
+    /// value (a value past it would convert to an indeterminate one, and an infinity would
+    /// turn the norm's statistics into NaN).
     pub fn prelude(self) -> &'static str {
         match self {
-            MapPrecision::F32 => "alias map_t = f32;\n",
-            MapPrecision::F16 => "enable f16;\nalias map_t = f16;\n",
+            MapPrecision::F32 => "alias map_t = f32;\nfn to_map(v: f32) -> map_t { return v; }\n",
+            MapPrecision::F16 => {
+                "enable f16;\nalias map_t = f16;\n\
+                 fn to_map(v: f32) -> map_t { return map_t(clamp(v, -65504.0, 65504.0)); }\n"
+            }
         }
     }
 }

@@ -1,5 +1,5 @@
 // Training loss (1 − λ)·L1 + λ·(1 − SSIM) over a batch of rgba images (alpha ignored) and its
-// gradient, in two fused passes over 16×16 tiles of pixels. SSIM's statistics are a separable,
+// gradient, in two fused passes over 16×8 tiles of pixels. SSIM's statistics are a separable,
 // zero-padded 11-tap Gaussian blur of (x, y, x², y², xy); the gradient blurs the per-pixel
 // partials (A, B, C) once more, since the symmetric window makes the blur its own adjoint:
 //   ∂SSIM/∂x = G∗A + 2x·(G∗B) + y·(G∗C).
