@@ -12,6 +12,8 @@ pub struct Counters {
     submissions: AtomicU64,
     dispatches: AtomicU64,
     bind_groups_created: AtomicU64,
+    throttle_wait_ns: AtomicU64,
+    submit_ns: AtomicU64,
 }
 
 /// A copy of the totals at one moment; subtract two to count what happened in between.
@@ -26,6 +28,12 @@ pub struct CounterSnapshot {
     pub submissions: u64,
     pub dispatches: u64,
     pub bind_groups_created: u64,
+    /// Nanoseconds the host spent in throttle waits: a step's host time less these is what
+    /// recording and submitting it cost the CPU.
+    pub throttle_wait_ns: u64,
+    /// Nanoseconds in `queue.submit` (wgpu's tracking and the driver's submit, which on
+    /// lavapipe blocks while the device is busy).
+    pub submit_ns: u64,
 }
 
 impl std::ops::Sub for CounterSnapshot {
@@ -38,6 +46,8 @@ impl std::ops::Sub for CounterSnapshot {
             submissions: self.submissions - o.submissions,
             dispatches: self.dispatches - o.dispatches,
             bind_groups_created: self.bind_groups_created - o.bind_groups_created,
+            throttle_wait_ns: self.throttle_wait_ns - o.throttle_wait_ns,
+            submit_ns: self.submit_ns - o.submit_ns,
         }
     }
 }
@@ -58,6 +68,10 @@ impl std::fmt::Display for CounterSnapshot {
     }
 }
 
+fn nanos(d: std::time::Duration) -> u64 {
+    u64::try_from(d.as_nanos()).unwrap_or(u64::MAX)
+}
+
 fn bump(c: &AtomicU64) {
     c.fetch_add(1, Ordering::Relaxed);
 }
@@ -72,6 +86,8 @@ impl Counters {
             submissions: get(&self.submissions),
             dispatches: get(&self.dispatches),
             bind_groups_created: get(&self.bind_groups_created),
+            throttle_wait_ns: get(&self.throttle_wait_ns),
+            submit_ns: get(&self.submit_ns),
         }
     }
 
@@ -81,11 +97,14 @@ impl Counters {
     pub(crate) fn blocking_read(&self) {
         bump(&self.blocking_reads);
     }
-    pub(crate) fn throttle_wait(&self) {
+    pub(crate) fn throttle_wait(&self, waited: std::time::Duration) {
         bump(&self.throttle_waits);
+        self.throttle_wait_ns
+            .fetch_add(nanos(waited), Ordering::Relaxed);
     }
-    pub(crate) fn submission(&self) {
+    pub(crate) fn submission(&self, took: std::time::Duration) {
         bump(&self.submissions);
+        self.submit_ns.fetch_add(nanos(took), Ordering::Relaxed);
     }
     pub(crate) fn dispatch(&self) {
         bump(&self.dispatches);

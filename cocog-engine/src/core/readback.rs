@@ -118,8 +118,9 @@ impl<T> Readback<T> {
         let mut out = Vec::new();
         while self.in_flight.len() >= self.depth {
             let (slot, _, _) = self.in_flight.front().expect("depth is at least 1");
-            ctx.counters.throttle_wait();
+            let t = std::time::Instant::now();
             wait_mapped(ctx, &slot.state)?;
+            ctx.counters.throttle_wait(t.elapsed());
             out.extend(self.take_ready()?);
         }
         Ok(out)

@@ -79,8 +79,11 @@ impl GpuContext {
 
     /// Submits a finished encoder of the caller's own (counted like a recorder's submission).
     pub fn submit(&self, encoder: wgpu::CommandEncoder) -> wgpu::SubmissionIndex {
-        self.counters.submission();
-        self.queue.submit([encoder.finish()])
+        let commands = encoder.finish();
+        let t = std::time::Instant::now();
+        let index = self.queue.submit([commands]);
+        self.counters.submission(t.elapsed());
+        index
     }
 
     fn take_arena(&self) -> wgpu::Buffer {

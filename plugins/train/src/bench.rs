@@ -80,6 +80,13 @@ pub struct BenchReport {
     pub iterations: u32,
     pub it_per_s: f64,
     pub ms_per_iteration: f64,
+    /// Of the unprofiled iterations, the wall time the host spent in each step less its
+    /// throttle waits for the GPU and its `queue.submit` calls: recording the step. Near
+    /// `ms_per_iteration`, the host, not the GPU, bounds the throughput.
+    pub host_ms_per_iteration: f64,
+    /// Wall time in `queue.submit` per iteration: wgpu's tracking and the driver's submit
+    /// (lavapipe's blocks while the device is busy, so there it is mostly waiting).
+    pub submit_ms_per_iteration: f64,
     /// Profiled: each phase waited for, so `total` exceeds `ms_per_iteration`.
     pub phases_ms: PhaseMs,
     pub peak_gpu_bytes: u64,
@@ -314,15 +321,21 @@ fn measure(
 ) -> Result<BenchReport, StageError> {
     let total = opts.warmup + 2 * opts.iterations;
     let gaussians_start = trainer.num_gaussians();
+    // Wall time inside `step`; less its throttle waits, what the host spends on a step.
+    let host = std::cell::Cell::new(std::time::Duration::ZERO);
     let mut step = |done: u32| -> Result<_, StageError> {
         ctx.check_cancelled()?;
         ctx.progress("bench", u64::from(done), u64::from(total));
-        trainer.step().map_err(StageError::other)
+        let t = Instant::now();
+        let stats = trainer.step().map_err(StageError::other);
+        host.set(host.get() + t.elapsed());
+        stats
     };
     for i in 0..opts.warmup {
         step(i)?;
     }
     gpu.wait().map_err(StageError::other)?;
+    let warm_host = host.get();
     gpu.memory.reset_peak();
     let ops_before = gpu.counters.snapshot();
     let clock = Instant::now();
@@ -332,6 +345,9 @@ fn measure(
     gpu.wait().map_err(StageError::other)?;
     let seconds = clock.elapsed().as_secs_f64();
     let ops = gpu.counters.snapshot() - ops_before;
+    let in_steps = (host.get() - warm_host).as_secs_f64();
+    let submit_seconds = ops.submit_ns as f64 * 1e-9;
+    let host_seconds = in_steps - ops.throttle_wait_ns as f64 * 1e-9 - submit_seconds;
     trainer.set_profiling(true);
     let timing = opts.kernels && gpu.profiler.enable(gpu);
     if opts.kernels && !timing {
@@ -390,6 +406,8 @@ fn measure(
         iterations: opts.iterations,
         it_per_s: f64::from(n) / seconds.max(1e-9),
         ms_per_iteration: 1e3 * seconds / f64::from(n),
+        host_ms_per_iteration: 1e3 * host_seconds / f64::from(n),
+        submit_ms_per_iteration: 1e3 * submit_seconds / f64::from(n),
         compositor_gflop_per_s: compositor_gflop
             .filter(|_| phases_ms.compositor > 0.0)
             .map(|g| g / (phases_ms.compositor / 1e3)),
@@ -456,6 +474,7 @@ impl BenchReport {
              Gaussians        {} → {} (from iteration {})\n\
              method           {}\n\
              throughput       {:.2} it/s, {:.1} ms/iteration ({} iterations)\n\
+             host ms/it       {:.2} recording | {:.2} in queue.submit\n\
              profiled ms/it   forward {:.1} | backward {:.1} | optimizer {:.1} | density {:.1}{} | sum {:.1}\n\
              engine ops/it    {:.2} buffers created | {:.2} blocking reads | {:.2} submissions | {:.1} dispatches | {:.2} bind groups created\n\
              peak GPU memory  {:.1} MiB (engine buffers)\n\
@@ -483,6 +502,8 @@ impl BenchReport {
             self.it_per_s,
             self.ms_per_iteration,
             self.iterations,
+            self.host_ms_per_iteration,
+            self.submit_ms_per_iteration,
             p.forward,
             p.backward,
             p.optimizer,
