@@ -221,24 +221,12 @@ pub fn composite(renders: &Maps, logits: &Maps) -> (Maps, Maps) {
 
 /// F on the renders, then the composite.
 pub fn forward(l: &CompositorLayout, p: &[f64], renders: &Maps) -> Trace {
-    let [c1, c2, head] = convs(l);
+    let [c1, c2, _] = convs(l);
     let z1 = conv(p, c1, renders);
-    let (y1, r1) = relu_norm(&z1);
+    let y1 = relu_norm(&z1).0;
     let z2 = conv(p, c2, &y1);
-    let (y2, r2) = relu_norm(&z2);
-    let logits = conv(p, head, &y2);
-    let (weights, blend) = composite(renders, &logits);
-    Trace {
-        renders: renders.clone(),
-        z1,
-        y1,
-        r1,
-        z2,
-        y2,
-        r2,
-        weights,
-        blend,
-    }
+    let y2 = relu_norm(&z2).0;
+    forward_from_stored(l, p, renders, &[z1, y1, z2, y2])
 }
 
 /// F's four stored maps (z1, y1, z2, y2: each layer's pre-activation and normalised output).
@@ -256,8 +244,8 @@ pub fn stored_from(l: &CompositorLayout, p: &[f64], renders: &Maps, given: &Stor
     ]
 }
 
-/// The trace of a forward that stored `given` (a GPU's maps): the statistics and the head
-/// computed from them, so its backward is the exact adjoint of that GPU's forward.
+/// The trace of a forward that stored `given` (exact maps, or a GPU's): the statistics and
+/// the head computed from them, so its backward is the exact adjoint of that forward.
 pub fn forward_from_stored(
     l: &CompositorLayout,
     p: &[f64],
