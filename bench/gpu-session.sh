@@ -1,7 +1,11 @@
 #!/usr/bin/env bash
 # What a short GPU lease is for, as bounded phases of one command (../shared/notes/gpu-device.md):
 #
-#   bench/gpu-session.sh RESULTS [PHASE...]        (default: step peer-synthetic peer-train)
+#   bench/gpu-session.sh RESULTS [PHASE...]  (default: step peer-synthetic tests peer-train)
+#
+# The default fits a 15-minute lease in two calls: the first runs step, peer-synthetic (which
+# builds gsplat) and tests, whose 160 s fit beside them where peer-train's 450 s would not; the
+# second, on the warm machine, runs peer-train.
 #
 # BUDGET (seconds, default 560) bounds the whole call: a phase that would not fit what is left is
 # skipped and says so in RESULTS/session.txt, and every command's timeout is cut to what is
@@ -35,7 +39,7 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 results="${1:?usage: bench/gpu-session.sh RESULTS [PHASE...]}"
 shift
 phases=("$@")
-((${#phases[@]})) || phases=(step peer-synthetic peer-train)
+((${#phases[@]})) || phases=(step peer-synthetic tests peer-train)
 budget="${BUDGET:-560}"
 dev="${DEV:-$root/.device}"
 work="${WORK:-/tmp/gpu-session}"
