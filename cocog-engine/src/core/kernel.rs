@@ -79,18 +79,16 @@ impl Kernel {
         let bind_group = self.bind_group(ctx, bindings);
         ctx.counters.dispatch();
         let timing = ctx.profiler.writes(&self.label);
-        let mut pass = rec
-            .encoder()
-            .begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some(&self.label),
-                timestamp_writes: timing.as_ref().map(|(set, i)| {
-                    wgpu::ComputePassTimestampWrites {
-                        query_set: set,
-                        beginning_of_pass_write_index: Some(*i),
-                        end_of_pass_write_index: Some(i + 1),
-                    }
+        let pass = rec.compute_pass(
+            &self.label,
+            timing
+                .as_ref()
+                .map(|(set, i)| wgpu::ComputePassTimestampWrites {
+                    query_set: set,
+                    beginning_of_pass_write_index: Some(*i),
+                    end_of_pass_write_index: Some(i + 1),
                 }),
-            });
+        );
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &bind_group, &[]);
         pass.dispatch_workgroups(grid[0], grid[1], grid[2]);

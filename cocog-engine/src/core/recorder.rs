@@ -58,9 +58,14 @@ impl Bind for UniformSlot {
 
 /// Records dispatches and copies for one `queue.submit`. Recording the same sequence of
 /// dispatches again puts every uniform at the same place in the same arena, so kernels find
-/// their bind groups cached.
+/// their bind groups cached. Consecutive dispatches share one compute pass (WebGPU orders the
+/// dispatches of a pass as it does separate passes), which spares the host a pass's begin and
+/// end per dispatch; a copy or clear through `encoder` ends it.
 pub struct Recorder<'c> {
     pub(crate) ctx: &'c GpuContext,
+    /// The open compute pass, and whether it is a timed one of a single dispatch. Declared
+    /// before the encoder so that it ends before the encoder is dropped.
+    pass: Option<(wgpu::ComputePass<'static>, bool)>,
     /// `None` only once submitted.
     encoder: Option<wgpu::CommandEncoder>,
     /// Arenas in use, each with the bytes staged for it.
@@ -72,6 +77,7 @@ impl GpuContext {
     pub fn recorder(&self) -> Recorder<'_> {
         Recorder {
             ctx: self,
+            pass: None,
             encoder: Some(self.device.create_command_encoder(&Default::default())),
             arenas: Vec::new(),
         }
@@ -105,11 +111,34 @@ impl<'c> Recorder<'c> {
         self.ctx
     }
 
-    /// The encoder, for copies and passes of the caller's own.
+    /// The encoder, for copies and passes of the caller's own (ends the open compute pass).
     pub fn encoder(&mut self) -> &mut wgpu::CommandEncoder {
+        self.pass = None;
         self.encoder
             .as_mut()
             .expect("a recorder is consumed by submit")
+    }
+
+    /// The compute pass for the next dispatch: the open one, or, for a dispatch with
+    /// `timestamps` (the kernel profiler's), a pass of its own.
+    pub(crate) fn compute_pass(
+        &mut self,
+        label: &str,
+        timestamps: Option<wgpu::ComputePassTimestampWrites<'_>>,
+    ) -> &mut wgpu::ComputePass<'static> {
+        let timed = timestamps.is_some();
+        if timed || self.pass.as_ref().is_none_or(|(_, alone)| *alone) {
+            self.pass = None;
+            let pass = self
+                .encoder()
+                .begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some(if timed { label } else { "dispatches" }),
+                    timestamp_writes: timestamps,
+                })
+                .forget_lifetime();
+            self.pass = Some((pass, timed));
+        }
+        &mut self.pass.as_mut().expect("a pass was just opened").0
     }
 
     /// Stages `value` for upload at submission and returns where kernels find it.
@@ -141,6 +170,7 @@ impl<'c> Recorder<'c> {
         for (buffer, staged) in &arenas {
             self.ctx.queue.write_buffer(buffer, 0, staged);
         }
+        self.pass = None;
         let encoder = self
             .encoder
             .take()
