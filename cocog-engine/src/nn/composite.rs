@@ -201,10 +201,7 @@ impl Compositor {
     /// maps (at least one; a render whose maps outgrow a binding is refused before training).
     fn chunk(&self, ctx: &GpuContext, pixels: u64, images: u32) -> u32 {
         let limit = self.binding_limit.unwrap_or_else(|| ctx.binding_limit());
-        let per_image = self.config.map_bytes(pixels, 1).max(1);
-        u32::try_from(limit / per_image)
-            .unwrap_or(u32::MAX)
-            .clamp(1, images.max(1))
+        self.config.renders_per_chunk(limit, pixels, images)
     }
 
     /// Both layers' buffers for `images` renders.

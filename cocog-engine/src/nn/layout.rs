@@ -30,6 +30,23 @@ impl CompositorConfig {
         4 * pixels * u64::from(images) * u64::from(self.channels)
     }
 
+    /// Renders F runs at once when one binding holds at most `binding_limit` bytes: all
+    /// `images`, or as many as a binding holds of a layer's maps (at least one).
+    pub fn renders_per_chunk(&self, binding_limit: u64, pixels: u64, images: u32) -> u32 {
+        let per_image = self.map_bytes(pixels, 1).max(1);
+        u32::try_from(binding_limit / per_image)
+            .unwrap_or(u32::MAX)
+            .clamp(1, images.max(1))
+    }
+
+    /// What running in chunks adds: the backward recomputes each chunk's two normalised
+    /// layers (their convolutions' forward operations), since only the last chunk's maps are
+    /// kept.
+    pub fn recompute_flops(&self, pixels: u64, images: u32) -> f64 {
+        let c = f64::from(self.channels);
+        2.0 * pixels as f64 * f64::from(images) * (25.0 * 3.0 * c + 9.0 * c * c)
+    }
+
     /// Floating-point operations (a multiply-add counts 2) of F's convolutions over `images`
     /// renders of `pixels` pixels: (forward, backward). The backward takes every layer's weight
     /// gradient and the input gradients of the second layer and the head; F sees detached
@@ -115,6 +132,18 @@ mod tests {
         // The paper's F over six 100×75 renders: 3.8 GFLOP forward.
         let (f, _) = CompositorConfig::default().flops(7500, 6);
         assert!((f - 3.80e9).abs() < 0.01e9, "{f}");
+        // A recompute is the forward less the head (18 of 204 multiply-adds at 2 channels).
+        let c2 = CompositorConfig::with_channels(2);
+        assert_eq!(c2.recompute_flops(1, 1), 2.0 * (150.0 + 36.0));
+    }
+
+    #[test]
+    fn chunks_hold_what_one_binding_holds() {
+        let c = CompositorConfig::with_channels(4);
+        let one = c.map_bytes(100, 1);
+        assert_eq!(c.renders_per_chunk(u64::MAX, 100, 6), 6);
+        assert_eq!(c.renders_per_chunk(2 * one + 1, 100, 6), 2);
+        assert_eq!(c.renders_per_chunk(one - 1, 100, 6), 1);
     }
 
     #[test]

@@ -97,7 +97,8 @@ pub struct BenchReport {
     /// With `kernels`: GPU time per kernel over the profiled iterations, largest first.
     pub kernels: Vec<KernelMs>,
     /// CoCoGaussian only: floating-point operations of F's convolutions per iteration,
-    /// forward and backward (`CompositorConfig::flops`), and what the compositor phase's
+    /// forward and backward (`CompositorConfig::flops`; with F in chunks, also the backward's
+    /// recompute of each chunk's layers), and what the compositor phase's
     /// time makes of them.
     pub compositor_gflop: Option<f64>,
     pub compositor_gflop_per_s: Option<f64>,
@@ -386,8 +387,15 @@ fn measure(
     let (width, height) = (views[0].camera.width, views[0].camera.height);
     let compositor_gflop = opts.coc.as_ref().map(|c| {
         let f = CompositorConfig::with_channels(c.compositor_channels);
-        let (fwd, bwd) = f.flops(u64::from(width) * u64::from(height), c.net.copies + 1);
-        (fwd + bwd) / 1e9
+        let (pixels, renders) = (u64::from(width) * u64::from(height), c.net.copies + 1);
+        let (fwd, bwd) = f.flops(pixels, renders);
+        let chunked = f.renders_per_chunk(gpu.binding_limit(), pixels, renders) < renders;
+        let recompute = if chunked {
+            f.recompute_flops(pixels, renders)
+        } else {
+            0.0
+        };
+        (fwd + bwd + recompute) / 1e9
     });
     Ok(BenchReport {
         adapter: gpu.adapter_name(),
