@@ -31,6 +31,17 @@ pub enum EngineError {
         needed_mib: f64,
         limit_mib: f64,
     },
+    #[error(
+        "a frame {width} pixels wide needs {needed_mib:.0} MiB for the loss's {rows} rows of \
+         SSIM terms and this adapter binds at most {limit_mib:.0} MiB: train on narrower \
+         images (--downscale) or on a GPU that binds more"
+    )]
+    FrameTooWide {
+        width: u32,
+        rows: u32,
+        needed_mib: f64,
+        limit_mib: f64,
+    },
     #[error("invalid input: {0}")]
     Invalid(String),
 }

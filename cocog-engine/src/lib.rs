@@ -19,7 +19,7 @@
 //! let moments = AdamMoments::new(ctx, 3 * batch.params.num_gaussians);
 //! let mut rec = ctx.recorder();
 //! let state = renderer.encode_forward(&mut rec, &mut ws, &batch, 1 << 20);
-//! let out = loss.compute(&mut rec, &mut ws, &state.rgba, target, w, h, n, 0.2);
+//! let out = loss.compute(&mut rec, &mut ws, &state.rgba, target, w, h, n, 0.2)?;
 //! let grads = renderer.encode_backward(&mut rec, &mut ws, &batch, &state, &out.v_pred, None);
 //! let lr = AdamConfig::with_lr(1.6e-4);
 //! // An overflowed intersection buffer (state.status) makes the update a no-op on the GPU.

@@ -49,7 +49,9 @@ fn optimising_all_parameters_reduces_the_loss() {
         let state = renderer.forward(ctx, &batch).unwrap();
         let mut rec = ctx.recorder();
         let mut ws = cocog_engine::Workspace::default();
-        let out = loss.compute(&mut rec, &mut ws, &state.rgba, &target, 64, 48, 1, 0.2);
+        let out = loss
+            .compute(&mut rec, &mut ws, &state.rgba, &target, 64, 48, 1, 0.2)
+            .expect("loss");
         rec.submit();
         if step == 1 || step == 60 {
             losses.push(out.read_loss(ctx).unwrap());

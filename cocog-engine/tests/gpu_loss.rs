@@ -73,16 +73,18 @@ fn compare_with_reference(
             None => ImageLoss::new(ctx),
         };
         let mut rec = ctx.recorder();
-        let out = loss.compute(
-            &mut rec,
-            &mut ws,
-            &ctx.storage_from("pred", pred),
-            &ctx.storage_from("target", target),
-            w as u32,
-            h as u32,
-            images as u32,
-            lambda,
-        );
+        let out = loss
+            .compute(
+                &mut rec,
+                &mut ws,
+                &ctx.storage_from("pred", pred),
+                &ctx.storage_from("target", target),
+                w as u32,
+                h as u32,
+                images as u32,
+                lambda,
+            )
+            .expect("the loss plans within the limit");
         rec.submit();
         let gpu_loss = out.read_loss(ctx).unwrap();
         let partials: Vec<u8> = ctx
@@ -188,20 +190,23 @@ fn gpu_loss_of_a_frame_in_row_bands_adds_up_to_the_frame() {
                 frame_pixels: (w * h) as u64,
             };
             let mut rec = ctx.recorder();
-            let out = loss.compute_rows(
-                &mut rec,
-                &mut ws,
-                &ctx.storage_from("pred", &band(&pred)),
-                &ctx.storage_from("target", &band(&target)),
-                w as u32,
-                (last - first) as u32,
-                1,
-                rows,
-                lambda,
-            );
+            let out = loss
+                .compute_rows(
+                    &mut rec,
+                    &mut ws,
+                    &ctx.storage_from("pred", &band(&pred)),
+                    &ctx.storage_from("target", &band(&target)),
+                    w as u32,
+                    (last - first) as u32,
+                    1,
+                    rows,
+                    lambda,
+                )
+                .expect("the loss plans within the limit");
             rec.submit();
             assert_eq!(
-                loss.slots(ctx, w as u32, (last - first) as u32, 1, rows) as usize,
+                loss.slots(ctx, w as u32, (last - first) as u32, 1, rows)
+                    .unwrap() as usize,
                 out.num_groups
             );
             total += out.read_loss(ctx).unwrap();

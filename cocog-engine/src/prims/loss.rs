@@ -26,6 +26,7 @@ struct Params {
 const HALO: u32 = 5;
 /// A tile of loss.wgsl's passes: columns × rows.
 const TILE: (u32, u32) = (16, 8);
+const MIB: f64 = 1024.0 * 1024.0;
 
 #[derive(Debug)]
 pub struct ImageLoss {
@@ -161,8 +162,9 @@ impl ImageLoss {
         height: u32,
         num_images: u32,
         rows: LossRows,
-    ) -> u32 {
-        Self::slots_of(&self.plan(ctx, width, height, num_images, rows.out), width)
+    ) -> Result<u32, EngineError> {
+        let bands = self.plan(ctx, width, height, num_images, rows.out)?;
+        Ok(Self::slots_of(&bands, width))
     }
 
     fn slots_of(bands: &[Band], width: u32) -> u32 {
@@ -179,21 +181,22 @@ impl ImageLoss {
         height: u32,
         num_images: u32,
         out: (u32, u32),
-    ) -> Vec<Band> {
+    ) -> Result<Vec<Band>, EngineError> {
         let limit = self.binding_limit.unwrap_or_else(|| ctx.binding_limit());
-        self.bands(limit, width, height, num_images, out)
+        Self::bands(limit, width, height, num_images, out)
     }
 
     /// The passes for `num_images` images of `width`×`height`: one over everything when its
-    /// scratch fits a binding, else bands of rows per image, each with its halo.
+    /// scratch fits a binding, else bands of rows per image, each with its halo. A band
+    /// scores at least one row and needs its halo, so a frame wider than `limit` allows for
+    /// `2·HALO + 1` rows of terms is refused rather than planned past the limit.
     fn bands(
-        &self,
         limit: u64,
         width: u32,
         height: u32,
         num_images: u32,
         out: (u32, u32),
-    ) -> Vec<Band> {
+    ) -> Result<Vec<Band>, EngineError> {
         // The scratch rows of scored rows y0..y1: HALO more each side, within the image.
         let scratch = move |y0: u32, y1: u32| {
             let row0 = y0.saturating_sub(HALO);
@@ -202,17 +205,28 @@ impl ImageLoss {
         let (row0, rows) = scratch(out.0, out.1);
         let pixels = u64::from(width) * u64::from(rows) * u64::from(num_images);
         if Self::largest_binding(pixels) <= limit {
-            return vec![Band {
+            return Ok(vec![Band {
                 row0,
                 rows,
                 out: (out.0 as i32, out.1 as i32),
                 num_images,
                 pixel0: 0,
-            }];
+            }]);
         }
         let rows_fit = limit / Self::largest_binding(u64::from(width));
+        let min_rows = u64::from(2 * HALO + 1);
+        if rows_fit < min_rows.min(u64::from(height)) {
+            return Err(EngineError::FrameTooWide {
+                width,
+                rows: min_rows as u32,
+                needed_mib: (min_rows * Self::largest_binding(u64::from(width))) as f64 / MIB,
+                limit_mib: limit as f64 / MIB,
+            });
+        }
+        // Within the limit: a band's scratch is its rows plus a halo each side, clipped to the
+        // image, and at least one row fits with its halo (or the whole image's height does).
         let band = (rows_fit.saturating_sub(u64::from(2 * HALO)) as u32).clamp(1, height);
-        (0..num_images)
+        Ok((0..num_images)
             .flat_map(|image| {
                 (out.0..out.1).step_by(band as usize).map(move |y0| {
                     let y1 = (y0 + band).min(out.1);
@@ -226,7 +240,7 @@ impl ImageLoss {
                     }
                 })
             })
-            .collect()
+            .collect())
     }
 
     pub fn new(ctx: &GpuContext) -> Self {
@@ -251,7 +265,7 @@ impl ImageLoss {
         height: u32,
         num_images: u32,
         lambda: f32,
-    ) -> LossOutput {
+    ) -> Result<LossOutput, EngineError> {
         let rows = LossRows {
             out: (0, height),
             frame_pixels: u64::from(width) * u64::from(height) * u64::from(num_images),
@@ -278,12 +292,12 @@ impl ImageLoss {
         num_images: u32,
         rows: LossRows,
         lambda: f32,
-    ) -> LossOutput {
+    ) -> Result<LossOutput, EngineError> {
         let ctx = rec.ctx();
         let pixels = width * height * num_images;
         let taps = window();
         let inv_n = 1.0 / (3.0 * rows.frame_pixels as f64);
-        let bands = self.plan(ctx, width, height, num_images, rows.out);
+        let bands = self.plan(ctx, width, height, num_images, rows.out)?;
         let scratch_px = |b: &Band| width * b.rows * b.num_images;
         let largest = bands.iter().map(scratch_px).max().unwrap_or(0);
         let slots = Self::slots_of(&bands, width);
@@ -320,12 +334,75 @@ impl ImageLoss {
                 .dispatch(rec, &backward, band.backward_grid(width));
             partial0 += band.forward_grid(width).iter().product::<u32>();
         }
-        LossOutput {
+        Ok(LossOutput {
             v_pred,
             partials,
             num_groups: slots as usize,
             lambda: f64::from(lambda),
             inv_n,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every planned pass stays within the binding limit, and the bands score each requested
+    /// row of each image exactly once with its full halo where the image has one.
+    #[test]
+    fn bands_fit_the_limit_and_cover_every_row_once() {
+        for (width, height, images) in [(7, 3, 1), (16, 40, 2), (33, 11, 3), (5, 100, 1)] {
+            let row = ImageLoss::largest_binding(u64::from(width));
+            for rows_fit in [1, 3, 10, 11, 12, 25, 1000] {
+                let limit = rows_fit * row + row / 2;
+                let out = (0, height);
+                let Ok(bands) = ImageLoss::bands(limit, width, height, images, out) else {
+                    assert!(rows_fit < 11 && rows_fit < u64::from(height));
+                    continue;
+                };
+                let mut scored = vec![0u32; (height * images) as usize];
+                for b in &bands {
+                    let px = u64::from(width) * u64::from(b.rows) * u64::from(b.num_images);
+                    assert!(ImageLoss::largest_binding(px) <= limit, "{width}x{height}");
+                    assert!(b.row0 <= (b.out.0 - HALO as i32).max(0));
+                    let end = b.row0 + b.rows as i32;
+                    assert!(end >= (b.out.1 + HALO as i32).min(height as i32));
+                    for image in 0..b.num_images {
+                        let first = b.pixel0 / (width * height) + image;
+                        for y in b.out.0..b.out.1 {
+                            scored[(first * height) as usize + y as usize] += 1;
+                        }
+                    }
+                }
+                assert!(
+                    scored.iter().all(|&n| n == 1),
+                    "{width}x{height} {rows_fit}"
+                );
+            }
         }
+    }
+
+    /// A frame too wide for one scored row and its halo in a binding is an error naming the
+    /// width, never a plan past the limit.
+    #[test]
+    fn a_frame_too_wide_for_its_halo_is_refused() {
+        let width = 1000;
+        let limit = 10 * ImageLoss::largest_binding(width.into());
+        match ImageLoss::bands(limit, width, 50, 1, (0, 50)) {
+            Err(EngineError::FrameTooWide { width: w, .. }) => assert_eq!(w, width),
+            Err(e) => panic!("unexpected error: {e}"),
+            Ok(_) => panic!("planned bands past the binding limit"),
+        }
+        // Eleven rows fit: one scored row per band.
+        let bands = ImageLoss::bands(
+            limit + ImageLoss::largest_binding(width.into()),
+            width,
+            50,
+            1,
+            (0, 50),
+        )
+        .expect("eleven rows fit");
+        assert_eq!(bands.len(), 50);
     }
 }

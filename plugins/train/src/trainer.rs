@@ -762,7 +762,7 @@ impl<'c> Trainer<'c> {
         let target = &self.targets[view];
         let out = self
             .loss
-            .compute(rec, ws, &state.rgba, target, w, h, 1, c.lambda_dssim);
+            .compute(rec, ws, &state.rgba, target, w, h, 1, c.lambda_dssim)?;
         watch.times.forward += watch.lap_recorded(rec)?;
         let grads = self
             .renderer

@@ -36,16 +36,18 @@ fn gradient_statistics_match_a_cpu_model() {
         let target = ctx.storage_from("target", &rgba);
         let state = renderer.forward(ctx, &batch).unwrap();
         let mut rec = ctx.recorder();
-        let out = loss.compute(
-            &mut rec,
-            &mut Workspace::default(),
-            &state.rgba,
-            &target,
-            W,
-            H,
-            1,
-            0.2,
-        );
+        let out = loss
+            .compute(
+                &mut rec,
+                &mut Workspace::default(),
+                &state.rgba,
+                &target,
+                W,
+                H,
+                1,
+                0.2,
+            )
+            .expect("loss");
         rec.submit();
         let grads = renderer.backward(ctx, &batch, &state, &out.v_pred, None);
         let mut rec = ctx.recorder();

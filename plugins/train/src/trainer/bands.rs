@@ -133,13 +133,13 @@ impl<'c> Trainer<'c> {
             out: (b.scored.0 - b.rendered.0, b.scored.1 - b.rendered.0),
             frame_pixels,
         };
-        let slots: u32 = bands
+        let slots = bands
             .iter()
             .map(|b| {
                 let rendered = b.rendered.1 - b.rendered.0;
                 self.loss.slots(ctx, w, rendered, 1, rows_of(b))
             })
-            .sum();
+            .sum::<Result<u32, _>>()?;
         let coeffs = 3 * sh_coeffs_per_channel(batch.params.sh_degree) as u32;
         let floats = [3 * n, 3 * n, 4 * n, n, coeffs * n];
         const NAMES: [&str; 5] = [
@@ -184,7 +184,7 @@ impl<'c> Trainer<'c> {
                 1,
                 rows_of(band),
                 lambda,
-            );
+            )?;
             let bytes = out.partials_bytes();
             band_rec.encoder().copy_buffer_to_buffer(
                 &out.partials.buffer,

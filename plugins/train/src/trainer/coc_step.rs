@@ -80,7 +80,7 @@ impl<'c> Trainer<'c> {
             h,
             1,
             self.config.lambda_dssim,
-        );
+        )?;
         watch.times.forward += watch.lap_recorded(rec)?;
         let back =
             coc.compositor
