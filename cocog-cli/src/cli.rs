@@ -84,8 +84,8 @@ pub enum Command {
     Prune(PruneArgs),
     /// Write the trained Gaussians to a file other tools open (PLY, glTF).
     Export(ExportArgs),
-    /// Render a trained scene's views to PNG, optionally with depth (EXR). Sharp only for
-    /// now: refocusing needs a CoCoGaussian model.
+    /// Render a trained scene's views to PNG, optionally with depth (EXR): sharp, or refocused
+    /// through a CoCoGaussian scene's lens model.
     Render(RenderArgs),
     /// Score images: PSNR, SSIM (both conventions), LPIPS.
     Eval(EvalArgs),
@@ -223,6 +223,15 @@ pub struct PhotosArgs {
     /// photos: fail unless this many photos register. Default: half of them, at least 3.
     #[arg(long = "min-registered")]
     pub min_registered: Option<u32>,
+}
+
+#[derive(Args)]
+pub struct SceneToImages {
+    /// The trained scene directory.
+    pub scene: PathBuf,
+    /// The folder of images to create (with --focus-sweep also a .gif or .mp4 file).
+    #[arg(short, long)]
+    pub output: PathBuf,
 }
 
 #[derive(Args)]
@@ -420,7 +429,8 @@ pub struct ScheduleArgs {
     /// Densify after this iteration. Default 500.
     #[arg(long = "densify-from")]
     pub densify_from: Option<u64>,
-    /// Densify (and reset opacities) only before this iteration. Default 15000.
+    /// Densify (and reset opacities) only before this iteration. Default 20000 (deblur, the
+    /// cocog default), 15000 (auto, inria).
     #[arg(long = "densify-until")]
     pub densify_until: Option<u64>,
     /// Iterations between densifications. Default 100.
@@ -438,12 +448,12 @@ pub struct ScheduleArgs {
     #[arg(long = "prune-opacity", value_parser = finite)]
     pub prune_opacity: Option<f64>,
     /// Prune Gaussians larger than this × scene scale, from the first opacity reset on
-    /// (from the first densification when resets are off); 0 turns it off. Default 0 (auto),
-    /// 0.1 (inria): on a capture around an object 0.1 removes large floaters.
+    /// (from the first densification when resets are off); 0 turns it off. Default 0 (deblur,
+    /// auto), 0.1 (inria): on a capture around an object 0.1 removes large floaters.
     #[arg(long = "prune-large", value_parser = finite)]
     pub prune_large: Option<f64>,
     /// Clamp every opacity to 0.01 each N iterations while densifying; 0 never.
-    /// Default 3000.
+    /// Default 0 (deblur, the cocog default), 3000 (auto, inria).
     #[arg(long = "opacity-reset-every")]
     pub opacity_reset_every: Option<u64>,
     /// Raise the spherical-harmonics degree every N iterations. Default 1000.
@@ -528,7 +538,7 @@ render, 2 = twice the blur). Examples:
 )]
 pub struct RenderArgs {
     #[command(flatten)]
-    pub io: SceneToScene,
+    pub io: SceneToImages,
     /// Which views: test, train or all. Default test.
     #[arg(long)]
     pub split: Option<String>,
@@ -696,7 +706,7 @@ pub struct BenchArgs {
     pub seed: Option<u64>,
     /// --synthetic: also write the workload to DIR (gaussians.ply in the INRIA layout and
     /// cameras.json), for a peer rasterizer to time the same Gaussians
-    /// (bench/peer_gsplat.py --workload DIR).
+    /// (`bench/peer_gsplat.py workload DIR --out FILE`).
     #[arg(long = "write-workload", value_name = "DIR", requires = "synthetic")]
     pub write_workload: Option<PathBuf>,
     /// Train on images downscaled by N. Default 1.
