@@ -45,6 +45,19 @@ impl std::fmt::Debug for GpuContext {
     }
 }
 
+/// Whether a `COCOG_NO_*` switch asks for a fallback: set to anything but empty, `0` or
+/// `false`, so `COCOG_NO_F16=0` reads as people mean it.
+fn switched_off(var: &str) -> bool {
+    std::env::var(var).is_ok_and(|v| switch_value_on(&v))
+}
+
+fn switch_value_on(v: &str) -> bool {
+    !matches!(
+        v.trim().to_ascii_lowercase().as_str(),
+        "" | "0" | "false" | "no" | "off"
+    )
+}
+
 fn rank(info: &wgpu::AdapterInfo) -> u32 {
     match info.device_type {
         wgpu::DeviceType::DiscreteGpu => 0,
@@ -145,11 +158,11 @@ impl GpuContext {
         let float_atomics = adapter
             .features()
             .contains(wgpu::Features::SHADER_FLOAT32_ATOMIC)
-            && std::env::var("COCOG_NO_FLOAT_ATOMICS").is_err();
+            && !switched_off("COCOG_NO_FLOAT_ATOMICS");
         let subgroups = adapter.features().contains(wgpu::Features::SUBGROUP)
-            && std::env::var("COCOG_NO_SUBGROUPS").is_err();
+            && !switched_off("COCOG_NO_SUBGROUPS");
         let shader_f16 = adapter.features().contains(wgpu::Features::SHADER_F16)
-            && std::env::var("COCOG_NO_F16").is_err();
+            && !switched_off("COCOG_NO_F16");
         let mut required_features = wgpu::Features::empty();
         if shader_f16 {
             required_features |= wgpu::Features::SHADER_F16;
@@ -215,5 +228,18 @@ impl GpuContext {
     pub fn adapter_name(&self) -> String {
         let i = &self.adapter_info;
         format!("{} ({:?}, {:?})", i.name, i.backend, i.device_type)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn a_switch_is_on_unless_empty_or_false() {
+        for v in ["1", "true", "yes", "TRUE", "anything"] {
+            assert!(super::switch_value_on(v), "{v}");
+        }
+        for v in ["", "0", "false", "False", "no", "off", " 0 "] {
+            assert!(!super::switch_value_on(v), "{v:?}");
+        }
     }
 }
