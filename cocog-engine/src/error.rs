@@ -1,5 +1,10 @@
 use thiserror::Error;
 
+/// Bytes as MiB, for the sizes errors report.
+pub(crate) fn mib(bytes: u64) -> f64 {
+    bytes as f64 / f64::from(1u32 << 20)
+}
+
 /// Everything the engine can fail with.
 #[derive(Debug, Error)]
 pub enum EngineError {

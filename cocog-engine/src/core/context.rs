@@ -45,8 +45,8 @@ impl std::fmt::Debug for GpuContext {
     }
 }
 
-/// Whether a `COCOG_NO_*` switch asks for a fallback: set to anything but empty, `0` or
-/// `false`, so `COCOG_NO_F16=0` reads as people mean it.
+/// Whether a `COCOG_NO_*` switch asks for a fallback: set to anything but empty, `0`,
+/// `false`, `no` or `off`, so `COCOG_NO_F16=0` reads as people mean it.
 fn switched_off(var: &str) -> bool {
     std::env::var(var).is_ok_and(|v| switch_value_on(&v))
 }

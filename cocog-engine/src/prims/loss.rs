@@ -2,6 +2,7 @@
 
 use crate::EngineError;
 use crate::core::{Bind, GpuBuffer, GpuContext, Kernel, Recorder, Workspace, shader};
+use crate::error::mib;
 use crate::reference::loss::window;
 
 #[repr(C)]
@@ -26,7 +27,6 @@ struct Params {
 const HALO: u32 = 5;
 /// A tile of loss.wgsl's passes: columns × rows.
 const TILE: (u32, u32) = (16, 8);
-const MIB: f64 = 1024.0 * 1024.0;
 
 #[derive(Debug)]
 pub struct ImageLoss {
@@ -219,8 +219,8 @@ impl ImageLoss {
             return Err(EngineError::FrameTooWide {
                 width,
                 rows: min_rows as u32,
-                needed_mib: (min_rows * Self::largest_binding(u64::from(width))) as f64 / MIB,
-                limit_mib: limit as f64 / MIB,
+                needed_mib: mib(min_rows * Self::largest_binding(u64::from(width))),
+                limit_mib: mib(limit),
             });
         }
         // Within the limit: a band's scratch is its rows plus a halo each side, clipped to the

@@ -2,6 +2,7 @@
 
 use crate::EngineError;
 use crate::core::{GpuBuffer, GpuContext, Workspace};
+use crate::error::mib;
 use crate::types::{Camera, GaussianGrads, GaussianParams, View, sh_coeffs_per_channel};
 
 /// GPU layout of one image's camera (see `ImageInfo` in project_common.wgsl).
@@ -59,7 +60,6 @@ pub fn check_fits_at(
     if gaussians * per <= limit {
         return Ok(());
     }
-    let mib = |b: u64| b as f64 / f64::from(1u32 << 20);
     Err(EngineError::TooManyGaussians {
         gaussians,
         sh_degree,
