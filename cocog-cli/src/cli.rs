@@ -690,7 +690,7 @@ pub struct BenchArgs {
     /// An ingested scene directory (with points), e.g. from `cocog ingest`.
     pub scene: Option<PathBuf>,
     /// Instead of a scene: N random Gaussians filling a ball, seen by a ring of cameras
-    /// (every Gaussian in every frame), at a fixed count (no density control) with all SH
+    /// (every Gaussian in every frame, unless --zoom), at a fixed count (no density control) with all SH
     /// bands active from the third iteration. Measures speed at any count and size without
     /// photos.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
@@ -704,6 +704,11 @@ pub struct BenchArgs {
     /// --synthetic: seed of the random Gaussians. Default 0.
     #[arg(long, conflicts_with = "scene")]
     pub seed: Option<u64>,
+    /// --synthetic: multiply the cameras' focal length by Z (≥ 1), so each frame sees the
+    /// middle of the ball and the rest of the Gaussians are culled, as in a capture that
+    /// surrounds the viewer (e.g. 3: about a third of them in each frame). Default 1.
+    #[arg(long, value_name = "Z", conflicts_with = "scene")]
+    pub zoom: Option<f64>,
     /// --synthetic: also write the workload to DIR (gaussians.ply in the INRIA layout and
     /// cameras.json), for a peer rasterizer to time the same Gaussians
     /// (`bench/peer_gsplat.py workload DIR --out FILE`).

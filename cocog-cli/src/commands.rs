@@ -275,6 +275,7 @@ fn bench(a: &crate::cli::BenchArgs, g: &Global, ctx: &dyn Context) -> Result<()>
                 height: a.size.map_or(1080, |s| s.1),
                 views: a.views.unwrap_or(8),
                 seed: a.seed.unwrap_or(0),
+                zoom: a.zoom.unwrap_or(1.0),
                 write_to: a.write_workload.clone(),
             };
             cocog_train::run_bench_synthetic(&spec, &opts, ctx)

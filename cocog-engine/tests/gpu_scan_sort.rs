@@ -35,10 +35,16 @@ fn prefix_sum_matches_cpu() {
 }
 
 fn check_sort(n: usize, modulo: u32, bits: u32, seed: u64) {
+    check_sort_of(random_u32(n, modulo, seed), bits, false);
+}
+
+/// Sorts `keys` (values: their positions) on the GPU and compares with a stable CPU sort; with
+/// `drop`, keys of `u32::MAX` are dropped and the kept count must come back too.
+fn check_sort_of(keys: Vec<u32>, bits: u32, drop: bool) {
     let Some(ctx) = gpu() else { return };
     let scan = PrefixSum::new(ctx);
     let sort = RadixSort::new(ctx);
-    let keys = random_u32(n, modulo, seed);
+    let n = keys.len();
     let values: Vec<u32> = (0..n as u32).collect();
     let mut bufs = SortBuffers::new(
         ctx,
@@ -48,17 +54,15 @@ fn check_sort(n: usize, modulo: u32, bits: u32, seed: u64) {
     );
     let mut rec = ctx.recorder();
     let mut ws = Workspace::default();
-    sort.encode(
-        &mut rec,
-        &mut ws,
-        &scan,
-        &mut bufs,
-        SortCount::Host(n as u32),
-        bits,
-    );
+    let count = SortCount::Host(n as u32);
+    // Set to garbage: the sort must write it.
+    let kept = ctx.storage_from("kept", &[u32::MAX - 1; 4]);
+    if drop {
+        sort.encode_dropping_max(&mut rec, &mut ws, &scan, &mut bufs, count, bits, &kept);
+    } else {
+        sort.encode(&mut rec, &mut ws, &scan, &mut bufs, count, bits);
+    }
     rec.submit();
-    let got_keys: Vec<u32> = ctx.read(&bufs.keys, n).unwrap();
-    let got_values: Vec<u32> = ctx.read(&bufs.values, n).unwrap();
     // Stable sort on the low `bits` bits: ties keep their input order.
     let mask = if bits >= 32 {
         u32::MAX
@@ -66,12 +70,57 @@ fn check_sort(n: usize, modulo: u32, bits: u32, seed: u64) {
         (1u32 << bits) - 1
     };
     let mut expected: Vec<(u32, u32)> = keys.iter().copied().zip(values.iter().copied()).collect();
-    expected.sort_by_key(|&(k, _)| k & mask);
-    let got: Vec<(u32, u32)> = got_keys.into_iter().zip(got_values).collect();
-    assert_eq!(got.len(), expected.len());
-    for (i, (g, e)) in got.iter().zip(&expected).enumerate() {
-        assert_eq!(g, e, "n={n} bits={bits}: position {i}");
+    if drop {
+        expected.retain(|&(k, _)| k != u32::MAX);
+        let got: Vec<u32> = ctx.read(&kept, 1).unwrap();
+        assert_eq!(
+            got[0] as usize,
+            expected.len(),
+            "n={n} bits={bits}: kept count"
+        );
     }
+    expected.sort_by_key(|&(k, _)| k & mask);
+    let m = expected.len();
+    let got_keys: Vec<u32> = ctx.read(&bufs.keys, n).unwrap();
+    let got_values: Vec<u32> = ctx.read(&bufs.values, n).unwrap();
+    let got: Vec<(u32, u32)> = got_keys.into_iter().zip(got_values).take(m).collect();
+    for (i, (g, e)) in got.iter().zip(&expected).enumerate() {
+        assert_eq!(g, e, "n={n} bits={bits} drop={drop}: position {i}");
+    }
+}
+
+/// Keys where a share of them are `u32::MAX` (culled Gaussians), the rest random below
+/// `modulo`.
+fn with_dropped(n: usize, modulo: u32, every: u64, seed: u64) -> Vec<u32> {
+    let mut rng = Rng::new(seed);
+    (0..n)
+        .map(|_| {
+            let r = rng.next_u64();
+            if r.is_multiple_of(every) {
+                u32::MAX
+            } else {
+                ((r >> 8) as u32) % modulo
+            }
+        })
+        .collect()
+}
+
+/// The depth sort's culling: dropped keys are set aside in the first pass and the later passes
+/// sort what is left. Most dropped (as in a capture around the viewer), a few, none, all;
+/// blocks left empty after the first pass, partial blocks, one pass (≤ 8 bits) and duplicates
+/// among the kept keys, and keys that differ from `u32::MAX` only in the unsorted high bits
+/// (kept: dropping looks at the whole key).
+#[test]
+fn radix_sort_drops_max_keys() {
+    check_sort_of(with_dropped(50_003, u32::MAX, 3, 10), 32, true);
+    check_sort_of(with_dropped(50_003, u32::MAX, 1, 11), 32, true);
+    check_sort_of(with_dropped(3001, 1000, 50, 12), 32, true);
+    check_sort_of(with_dropped(3001, 1000, 2, 13), 8, true);
+    check_sort_of(random_u32(2049, 77, 14), 32, true);
+    check_sort_of(vec![u32::MAX; 1500], 32, true);
+    check_sort_of(vec![u32::MAX, 5, u32::MAX - 1, 5, 0, u32::MAX], 12, true);
+    check_sort_of(vec![u32::MAX], 32, true);
+    check_sort_of(vec![3], 32, true);
 }
 
 #[test]

@@ -72,6 +72,37 @@ pub fn random_workload(
     }
 }
 
+impl Workload {
+    /// Multiplies every camera's focal length by `zoom` (≥ 1): each frame then sees the middle
+    /// of the ball only, so part of the Gaussians fall outside it, as in a capture that
+    /// surrounds the viewer, where most of the scene is beside or behind each camera.
+    pub fn zoom(&mut self, zoom: f64) {
+        for c in &mut self.cameras {
+            c.fx *= zoom;
+            c.fy *= zoom;
+        }
+    }
+
+    /// The share of (Gaussian, camera) pairs whose mean projects into the frame.
+    pub fn in_frame(&self) -> f64 {
+        let mut inside = 0usize;
+        for cam in &self.cameras {
+            let m = cam.world_from_camera;
+            for p in &self.gaussians.means {
+                let d = [0, 1, 2].map(|i| f64::from(p[i]) - m[i][3]);
+                // Camera axes are the rotation's columns: coordinates are dot products.
+                let c = [0, 1, 2].map(|j| (0..3).map(|i| m[i][j] * d[i]).sum::<f64>());
+                let u = cam.fx * c[0] / c[2] + cam.cx;
+                let v = cam.fy * c[1] / c[2] + cam.cy;
+                let frame = (0.0..f64::from(cam.width)).contains(&u)
+                    && (0.0..f64::from(cam.height)).contains(&v);
+                inside += usize::from(c[2] > 0.0 && frame);
+            }
+        }
+        inside as f64 / (self.cameras.len() * self.gaussians.len()).max(1) as f64
+    }
+}
+
 /// Cameras evenly around the ball at alternating heights, looking at its centre; the focal
 /// length fits the ball into the shorter side of the frame.
 fn ring(width: u32, height: u32, views: usize) -> Vec<Camera> {
@@ -141,6 +172,28 @@ mod tests {
             .map(f64::abs)
             .sum();
         assert!(mean < 1e-9, "{mean}");
+    }
+
+    /// Zooming leaves part of the ball out of every frame; `in_frame` agrees with a count by
+    /// the hand projection above.
+    #[test]
+    fn zoom_leaves_part_of_the_ball_out_of_frame() {
+        let mut w = random_workload(4000, 160, 90, 4, 0, 3);
+        assert_eq!(w.in_frame(), 1.0);
+        let before: Vec<f64> = w.cameras.iter().map(|c| c.fx).collect();
+        w.zoom(3.0);
+        let mut inside = 0;
+        for (c, f) in w.cameras.iter().zip(before) {
+            assert_eq!((c.fx, c.fy), (3.0 * f, 3.0 * f));
+            for &p in &w.gaussians.means {
+                let (u, v, z) = project(c, p);
+                inside +=
+                    usize::from(z > 0.0 && (0.0..160.0).contains(&u) && (0.0..90.0).contains(&v));
+            }
+        }
+        let share = w.in_frame();
+        assert_eq!(share, inside as f64 / 16000.0);
+        assert!((0.1..0.6).contains(&share), "{share}");
     }
 
     #[test]

@@ -5,6 +5,9 @@
 // and writes each pair to its (digit, block) position plus its rank among the block's pairs
 // of that digit. The local sort keeps equal digits in input order (stability is what makes LSD
 // radix correct) and writes each digit's run of a block to consecutive addresses.
+// A first pass may drop the pairs whose key is 0xffffffff (culled Gaussians): they take a 257th
+// digit after every other, are not written, and the count of the rest lands in `kept`, so the
+// later passes sort only those.
 
 struct Params {
     // The pair count, or with a GPU count its upper bound (the buffers' capacity).
@@ -15,7 +18,8 @@ struct Params {
     count_at: u32,
     // The pass's digit mask: 255, or fewer bits on a last pass that sorts fewer than 8.
     mask: u32,
-    pad0: u32,
+    // 1: this pass drops keys of 0xffffffff and writes how many pairs it kept.
+    drop: u32,
     pad1: u32,
     pad2: u32,
 }
@@ -27,6 +31,7 @@ struct Params {
 @group(0) @binding(4) var<storage, read_write> keys_out: array<u32>;
 @group(0) @binding(5) var<storage, read_write> values_out: array<u32>;
 @group(0) @binding(6) var<storage, read> count_src: array<u32>;
+@group(0) @binding(7) var<storage, read_write> kept: array<u32>;
 
 fn num_pairs() -> u32 {
     if (params.count_at == 0xffffffffu) {
@@ -39,8 +44,13 @@ const THREADS: u32 = 256u;
 const ITEMS: u32 = 4u;
 const BLOCK: u32 = 1024u;
 const DIGITS: u32 = 256u;
+const DROPPED: u32 = 0xffffffffu;
 
+// The pass's digit of `key`: DIGITS, past every other, for a key this pass drops.
 fn digit_of(key: u32) -> u32 {
+    if (params.drop == 1u && key == DROPPED) {
+        return DIGITS;
+    }
     return (key >> params.shift) & params.mask;
 }
 
@@ -48,7 +58,7 @@ fn block_index(wid: vec3<u32>, nwg: vec3<u32>) -> u32 {
     return wid.x + wid.y * nwg.x;
 }
 
-var<workgroup> digit_counts: array<atomic<u32>, 256>;
+var<workgroup> digit_counts: array<atomic<u32>, 257>;
 
 @compute @workgroup_size(256)
 fn count_digits(
@@ -59,6 +69,9 @@ fn count_digits(
     let block = block_index(wid, nwg);
     let n = num_pairs();
     atomicStore(&digit_counts[tid], 0u);
+    if (tid == 0u) {
+        atomicStore(&digit_counts[DIGITS], 0u);
+    }
     workgroupBarrier();
     for (var i = 0u; i < ITEMS; i++) {
         let idx = block * BLOCK + i * THREADS + tid;
@@ -69,6 +82,9 @@ fn count_digits(
     workgroupBarrier();
     if (block < params.num_blocks) {
         histogram[tid * params.num_blocks + block] = atomicLoad(&digit_counts[tid]);
+        if (tid == 0u && params.drop == 1u) {
+            histogram[DIGITS * params.num_blocks + block] = atomicLoad(&digit_counts[DIGITS]);
+        }
     }
 }
 
@@ -76,7 +92,7 @@ var<workgroup> local_keys: array<u32, 1024>;
 var<workgroup> local_values: array<u32, 1024>;
 var<workgroup> sums: array<u32, 256>;
 // Per digit, its first position in the locally sorted block.
-var<workgroup> starts: array<u32, 256>;
+var<workgroup> starts: array<u32, 257>;
 
 // Inclusive sum of `v` over threads 0..=tid.
 fn scan(tid: u32, v: u32) -> u32 {
@@ -109,19 +125,33 @@ fn scatter(
     }
     // Pairs past the count take the largest digit: being last in the input, the stable local
     // sort leaves them last, where nothing writes them out.
+    var pad_key = params.mask << params.shift;
+    if (params.drop == 1u) {
+        pad_key = DROPPED;
+    }
+    if (block == 0u && tid == 0u && params.drop == 1u) {
+        // The exclusive scan's start of the dropped row: every kept pair comes before it.
+        kept[0] = histogram[DIGITS * params.num_blocks];
+    }
+    // Blocks wholly past a GPU count (a capacity's, or the kept Gaussians') have nothing to
+    // sort: without this they would sort a block of padding.
+    if (valid == 0u) {
+        return;
+    }
     for (var i = 0u; i < ITEMS; i++) {
         let p = i * THREADS + tid;
         if (p < valid) {
             local_keys[p] = keys_in[base + p];
             local_values[p] = values_in[base + p];
         } else {
-            local_keys[p] = params.mask << params.shift;
+            local_keys[p] = pad_key;
             local_values[p] = 0u;
         }
     }
     workgroupBarrier();
     // Thread tid owns positions 4·tid … 4·tid + 3 during the splits.
-    let bits = countOneBits(params.mask);
+    // A dropping pass splits on one more bit: its digits run to DIGITS.
+    let bits = countOneBits(params.mask) + params.drop;
     for (var b = 0u; b < bits; b++) {
         var k: array<u32, 4>;
         var v: array<u32, 4>;
@@ -129,7 +159,7 @@ fn scatter(
         for (var i = 0u; i < ITEMS; i++) {
             k[i] = local_keys[ITEMS * tid + i];
             v[i] = local_values[ITEMS * tid + i];
-            ones += (k[i] >> (params.shift + b)) & 1u;
+            ones += (digit_of(k[i]) >> b) & 1u;
         }
         let ones_through = scan(tid, ones);
         let total_ones = sums[THREADS - 1u];
@@ -137,7 +167,7 @@ fn scatter(
         var one_at = BLOCK - total_ones + ones_through - ones;
         var zero_at = ITEMS * tid - (ones_through - ones);
         for (var i = 0u; i < ITEMS; i++) {
-            if (((k[i] >> (params.shift + b)) & 1u) == 1u) {
+            if (((digit_of(k[i]) >> b) & 1u) == 1u) {
                 local_keys[one_at] = k[i];
                 local_values[one_at] = v[i];
                 one_at += 1u;
@@ -159,8 +189,8 @@ fn scatter(
     workgroupBarrier();
     for (var i = 0u; i < ITEMS; i++) {
         let p = i * THREADS + tid;
-        if (p < valid) {
-            let d = digit_of(local_keys[p]);
+        let d = digit_of(local_keys[p]);
+        if (p < valid && d < DIGITS) {
             let dst = histogram[d * params.num_blocks + block] + p - starts[d];
             keys_out[dst] = local_keys[p];
             values_out[dst] = local_values[p];

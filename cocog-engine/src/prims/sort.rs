@@ -18,7 +18,8 @@ struct Params {
     num_blocks: u32,
     count_at: u32,
     mask: u32,
-    pad: [u32; 3],
+    drop: u32,
+    pad: [u32; 2],
 }
 
 #[derive(Debug)]
@@ -69,6 +70,18 @@ impl RadixSort {
         }
     }
 
+    /// A sort whose kernels profile under their own names, e.g. "scatter (depth)", so a
+    /// profile tells one sort of a pass from another.
+    pub fn labelled(ctx: &GpuContext, what: &str) -> Self {
+        let module = shader(ctx, "radix", include_str!("radix.wgsl"));
+        let kernel =
+            |entry: &str| Kernel::labelled(ctx, &module, entry, &format!("{entry} ({what})"));
+        Self {
+            count: kernel("count_digits"),
+            scatter: kernel("scatter"),
+        }
+    }
+
     /// Records a stable sort of the pairs on the low `bits` key bits. Passes ping-pong through
     /// the scratch buffers; `bufs` ends up naming whichever pair holds the result.
     pub fn encode(
@@ -80,40 +93,78 @@ impl RadixSort {
         count: SortCount,
         bits: u32,
     ) {
-        let (n, count_buf, count_at) = match count {
-            // The kernels never read it then, but binding 6 must hold some other buffer.
-            SortCount::Host(n) => (
-                n,
-                ws.buffer(rec.ctx(), "radix no count", 16).buffer,
-                HOST_COUNT,
-            ),
+        self.encode_passes(rec, ws, prefix_sum, bufs, count, bits, None);
+    }
+
+    /// As `encode`, but the pairs whose key is `u32::MAX` are dropped: the sorted pairs are the
+    /// first `kept[0]` of `bufs` (written on the GPU; past them the buffers hold scratch). The
+    /// first pass sorts every pair and sets the dropped ones aside, the later passes only the
+    /// kept ones — a depth sort where most Gaussians are culled costs about one full pass.
+    pub fn encode_dropping_max(
+        &self,
+        rec: &mut Recorder,
+        ws: &mut Workspace,
+        prefix_sum: &PrefixSum,
+        bufs: &mut SortBuffers,
+        count: SortCount,
+        bits: u32,
+        kept: &GpuBuffer,
+    ) {
+        self.encode_passes(rec, ws, prefix_sum, bufs, count, bits, Some(kept));
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn encode_passes(
+        &self,
+        rec: &mut Recorder,
+        ws: &mut Workspace,
+        prefix_sum: &PrefixSum,
+        bufs: &mut SortBuffers,
+        count: SortCount,
+        bits: u32,
+        kept: Option<&GpuBuffer>,
+    ) {
+        // The kernels never read these then, but bindings 6 and 7 must hold other buffers
+        // (binding 7 is written, so never the buffer binding 6 reads).
+        let unused = |rec: &Recorder, ws: &mut Workspace, label| ws.buffer(rec.ctx(), label, 16);
+        let (n, mut count_buf, mut count_at) = match count {
+            SortCount::Host(n) => (n, unused(rec, ws, "radix no count").buffer, HOST_COUNT),
             SortCount::Gpu {
                 capacity,
                 buffer,
                 index,
             } => (capacity, buffer.clone(), index),
         };
-        if n <= 1 && count_at == HOST_COUNT {
+        if n <= 1 && count_at == HOST_COUNT && kept.is_none() {
             return;
         }
+        let no_kept = unused(rec, ws, "radix no kept count");
         let num_blocks = n.div_ceil(BLOCK).max(1);
+        // A dropping pass has one more row, after every digit's.
+        let rows = DIGITS + u32::from(kept.is_some());
         let histogram = ws.buffer(
             rec.ctx(),
             "radix histogram",
-            u64::from(num_blocks) * u64::from(DIGITS) * 4,
+            u64::from(num_blocks) * u64::from(rows) * 4,
         );
         for pass in 0..bits.div_ceil(BITS_PER_PASS) {
             let shift = pass * BITS_PER_PASS;
             // The last pass's digit holds only the bits left to sort: keys may carry others.
             let width = (bits - shift).min(BITS_PER_PASS);
+            let drop = pass == 0 && kept.is_some();
             let params = rec.uniform(&Params {
                 n,
                 shift,
                 num_blocks,
                 count_at,
                 mask: (1 << width) - 1,
-                pad: [0; 3],
+                drop: u32::from(drop),
+                pad: [0; 2],
             });
+            let kept_out = match kept {
+                Some(k) if drop => k,
+                _ => &no_kept,
+            };
             self.count.dispatch_1d(
                 rec,
                 &[
@@ -124,7 +175,8 @@ impl RadixSort {
                 ],
                 num_blocks,
             );
-            prefix_sum.encode(rec, ws, &histogram, num_blocks * DIGITS);
+            let rows = if drop { DIGITS + 1 } else { DIGITS };
+            prefix_sum.encode(rec, ws, &histogram, num_blocks * rows);
             self.scatter.dispatch_1d(
                 rec,
                 &[
@@ -135,11 +187,17 @@ impl RadixSort {
                     (4, &bufs.keys_tmp),
                     (5, &bufs.values_tmp),
                     (6, &count_buf),
+                    (7, kept_out),
                 ],
                 num_blocks,
             );
             std::mem::swap(&mut bufs.keys, &mut bufs.keys_tmp);
             std::mem::swap(&mut bufs.values, &mut bufs.values_tmp);
+            if let (Some(k), true) = (kept, drop) {
+                // The later passes sort only what the first kept.
+                count_buf = k.buffer.clone();
+                count_at = 0;
+            }
         }
     }
 }

@@ -1,5 +1,5 @@
 // Projection forward: one thread per Gaussian (all images of the batch). Culled Gaussians
-// get no tiles and the largest depth key so they sort last.
+// get no tiles and the largest depth key, which the depth sort drops.
 
 @group(0) @binding(7) var<storage, read_write> projected: array<vec4<f32>>;
 @group(0) @binding(8) var<storage, read_write> rects: array<vec4<u32>>;

@@ -50,7 +50,9 @@ struct RasterParams {
 #[derive(Debug)]
 pub struct Renderer {
     scan: PrefixSum,
-    sort: RadixSort,
+    // Separate so a profile splits their passes.
+    depth_sort: RadixSort,
+    tile_sort: RadixSort,
     project: Kernel,
     project_backward: Kernel,
     gather_counts: Kernel,
@@ -119,7 +121,8 @@ impl Renderer {
         let rasterize_backward_src = format!("{raster_bwd_src}\n{atomics}\n{flush}");
         Self {
             scan: PrefixSum::new(ctx),
-            sort: RadixSort::new(ctx),
+            depth_sort: RadixSort::labelled(ctx, "depth"),
+            tile_sort: RadixSort::labelled(ctx, "tiles"),
             project: Kernel::new(ctx, &project, "project"),
             project_backward: Kernel::new(ctx, &project_bwd, "project_backward"),
             gather_counts: Kernel::new(ctx, &tiles, "gather_counts"),
@@ -250,8 +253,19 @@ impl Renderer {
             ],
             groups(n),
         );
-        self.sort
-            .encode(rec, ws, &self.scan, &mut by_depth, SortCount::Host(n), 32);
+        // Culled Gaussians (no tile: off-frame, behind the camera, too faint) carry the largest
+        // key and are dropped by the sort's first pass: the later passes and the binning see
+        // the visible ones only.
+        let visible = ws.buffer(ctx, "visible count", 16);
+        self.depth_sort.encode_dropping_max(
+            rec,
+            ws,
+            &self.scan,
+            &mut by_depth,
+            SortCount::Host(n),
+            32,
+            &visible,
+        );
         let total_tiles = tiles_x * tiles_y * batch.num_images();
         let params = rec.uniform(&TileParams {
             num_gaussians: n,
@@ -268,6 +282,7 @@ impl Renderer {
                 (1, &by_depth.values),
                 (2, &counts),
                 (3, &offsets),
+                (10, &visible),
             ],
             groups(n + 1),
         );
@@ -295,6 +310,7 @@ impl Renderer {
                 (5, &by_tile.keys),
                 (6, &by_tile.values),
                 (8, &projected),
+                (10, &visible),
             ],
             groups(n),
         );
@@ -305,7 +321,7 @@ impl Renderer {
             buffer: &offsets,
             index: n,
         };
-        self.sort
+        self.tile_sort
             .encode(rec, ws, &self.scan, &mut by_tile, count, tile_bits);
         self.tile_ranges.dispatch_1d(
             rec,

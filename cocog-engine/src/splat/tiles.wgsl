@@ -1,5 +1,6 @@
-// Tile binning. After the Gaussians are sorted by depth, `gather_counts` lays out their tile
-// counts in depth order (plus a trailing zero so the exclusive scan also yields the total),
+// Tile binning. After the Gaussians are sorted by depth (the culled ones dropped: only the first
+// `visible[0]` sorted ids are real), `gather_counts` lays out their tile counts in depth order
+// (zeros past the visible ones, and a trailing zero so the exclusive scan also yields the total),
 // `emit_keys` writes one (tile, Gaussian) pair per covered tile — in depth order, so a
 // stable sort on the tile alone leaves each tile's list front to back — and `tile_ranges`
 // finds where each tile's run starts and ends in the sorted pairs.
@@ -28,6 +29,8 @@ struct Params {
 @group(0) @binding(8) var<storage, read> projected: array<vec4<f32>>;
 // [overflowed, intersections needed], read back asynchronously by training loops.
 @group(0) @binding(9) var<storage, read_write> status: array<u32>;
+// How many Gaussians the depth sort kept: those with at least one tile.
+@group(0) @binding(10) var<storage, read> visible: array<u32>;
 
 fn linear_id(gid: vec3<u32>, nwg: vec3<u32>) -> u32 {
     return gid.x + gid.y * nwg.x * 256u;
@@ -36,9 +39,9 @@ fn linear_id(gid: vec3<u32>, nwg: vec3<u32>) -> u32 {
 @compute @workgroup_size(256)
 fn gather_counts(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
     let s = linear_id(gid, nwg);
-    if (s < params.num_gaussians) {
+    if (s < visible[0]) {
         offsets[s] = counts[ids_sorted[s]];
-    } else if (s == params.num_gaussians) {
+    } else if (s <= params.num_gaussians) {
         offsets[s] = 0u;
     }
 }
@@ -46,7 +49,7 @@ fn gather_counts(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_wor
 @compute @workgroup_size(256)
 fn emit_keys(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
     let s = linear_id(gid, nwg);
-    if (s >= params.num_gaussians) {
+    if (s >= visible[0]) {
         return;
     }
     let g = ids_sorted[s];

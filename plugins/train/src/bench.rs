@@ -206,6 +206,8 @@ pub struct SyntheticSpec {
     pub height: u32,
     pub views: u32,
     pub seed: u64,
+    /// Focal length × this (≥ 1): part of the Gaussians then fall outside each frame.
+    pub zoom: f64,
     /// Also write the workload here (`gaussians.ply`, INRIA layout, and `cameras.json`), so a
     /// peer rasterizer can time the same Gaussians (`bench/peer_gsplat.py --workload`).
     pub write_to: Option<PathBuf>,
@@ -224,11 +226,17 @@ pub fn run_bench_synthetic(
             "a synthetic workload needs Gaussians, views and a size, got {spec:?}"
         )));
     }
+    if !(spec.zoom.is_finite() && spec.zoom >= 1.0) {
+        return Err(StageError::Options(format!(
+            "--zoom must be a number >= 1 (1 keeps the whole ball in every frame), got {}",
+            spec.zoom
+        )));
+    }
     ctx.info(&format!(
         "synthetic workload: {} Gaussians, {} views of {}×{}, seed {}",
         spec.gaussians, spec.views, spec.width, spec.height, spec.seed
     ));
-    let work = cocog_synth::workload::random_workload(
+    let mut work = cocog_synth::workload::random_workload(
         spec.gaussians as usize,
         spec.width,
         spec.height,
@@ -236,6 +244,7 @@ pub fn run_bench_synthetic(
         opts.max_sh_degree,
         spec.seed,
     );
+    work.zoom(spec.zoom);
     if let Some(dir) = &spec.write_to {
         write_workload(dir, &work)?;
         ctx.info(&format!("workload written to {}", dir.display()));
@@ -261,10 +270,17 @@ pub fn run_bench_synthetic(
     };
     let gpu = GpuContext::new().map_err(StageError::other)?;
     let trainer = Trainer::new(&gpu, &work.gaussians, &views, config).map_err(StageError::other)?;
-    let source = format!(
+    let mut source = format!(
         "synthetic: {} random Gaussians, seed {}",
         spec.gaussians, spec.seed
     );
+    if spec.zoom != 1.0 {
+        source += &format!(
+            ", zoom {}: {:.1}% of the means in each frame",
+            spec.zoom,
+            100.0 * work.in_frame()
+        );
+    }
     measure(&gpu, trainer, &views, 0, source, opts, ctx)
 }
 
