@@ -19,8 +19,9 @@
 #                   implicit GEMMs and as tiled kernels (COCOG_F_CONV=tiled), and with F's maps
 #                   in f32 (COCOG_NO_F16=1) as well as f16, with the per-kernel split
 #                   (--kernels)                                                          ~95 s
-#   peer-synthetic  #11: `cocog bench --synthetic 1000000 --size 1920x1080`, then gsplat on the
-#                   same Gaussians and cameras (peer_gsplat.py workload)          ~40 s + gsplat build
+#   peer-synthetic  #11: `cocog bench --synthetic 1000000 --size 1920x1080` (and with --zoom 3,
+#                   most Gaussians culled, per kernel), then gsplat on the same Gaussians and
+#                   cameras (peer_gsplat.py workload)                             ~55 s + gsplat build
 #   peer-train      #11: sharp-dev at 400×300, 30000 iterations: `cocog train --method 3dgs`
 #                   (timed without evaluations or checkpoints) and `cocog eval`, then gsplat on
 #                   the same views (peer_gsplat.py train)                          ~350 s + gsplat build
@@ -103,6 +104,9 @@ phase_step() {
 phase_peer_synthetic() {
     bounded 120 "$cocog" bench --synthetic 1000000 --size 1920x1080 --iterations 20 --warmup 5 \
         --write-workload "$work/workload" >>"$log" 2>&1
+    # The visible-only depth sort where most Gaussians are culled (about a third in frame).
+    bounded 60 "$cocog" bench --synthetic 1000000 --size 1920x1080 --zoom 3 --iterations 20 \
+        --warmup 5 --kernels >>"$log" 2>&1
     gsplat_ready && bounded 300 python3 "$root/bench/peer_gsplat.py" workload "$work/workload" \
         --out "$results/gsplat-synthetic.json" --iterations 20 --warmup 5 >>"$log" 2>&1
 }
@@ -149,7 +153,7 @@ while ((i < ${#phases[@]})); do
     i=$((i + 1))
     case "$p" in
         step) run_phase step 130 ;;
-        peer-synthetic) run_phase peer-synthetic 150 ;;
+        peer-synthetic) run_phase peer-synthetic 165 ;;
         peer-train) run_phase peer-train 450 ;;
         idle-bench) run_phase idle-bench 120 ;;
         tests) run_phase tests 160 ;;
