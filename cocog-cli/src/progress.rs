@@ -31,6 +31,9 @@ struct Task {
     /// Count at the first report: a resumed run starts mid-way, and rates must count only the
     /// work done since.
     first: u64,
+    /// Count at the last progress line, and the rate the lines report (`recent_rate`).
+    last_done: u64,
+    rate: Option<f64>,
 }
 
 impl CliContext {
@@ -109,6 +112,8 @@ impl Context for CliContext {
                 started: Instant::now(),
                 last_line: Instant::now(),
                 first: done,
+                last_done: done,
+                rate: None,
             }
         });
         if total > 0 && t.bar.length() != Some(total) {
@@ -123,8 +128,15 @@ impl Context for CliContext {
         } else if let Some(every) = self.line_every
             && t.last_line.elapsed() >= every
         {
+            let since_last = t.last_line.elapsed().as_secs_f64();
+            let elapsed = t.started.elapsed();
+            let overall = rate(done, t.first, elapsed.as_secs_f64());
+            let interval = rate(done, t.last_done, since_last);
+            let r = recent_rate(t.rate, overall, interval);
+            t.rate = Some(r);
             t.last_line = Instant::now();
-            let line = progress_line(task, done, total, t.first, t.started.elapsed());
+            t.last_done = done;
+            let line = progress_line(task, done, total, r, elapsed);
             eprintln!("{line}");
         }
     }
@@ -140,6 +152,17 @@ fn rate(done: u64, first: u64, secs: f64) -> f64 {
         done.saturating_sub(first) as f64 / secs
     } else {
         0.0
+    }
+}
+
+/// The rate a progress line reports: at the first line the average since the start, then a
+/// moving average of each interval's rate (weight 0.3 on the newest, about the last three lines).
+/// Training slows as it goes (the blur model starts, the Gaussians multiply), so the average
+/// since the start would promise an end several times too early.
+fn recent_rate(previous: Option<f64>, overall: f64, interval: f64) -> f64 {
+    match previous {
+        None => overall,
+        Some(p) => 0.3 * interval + 0.7 * p,
     }
 }
 
@@ -169,10 +192,9 @@ fn speed(rate: f64) -> String {
 }
 
 /// `train: 1200/7000 (17%), 9.8/s, 2m 03s elapsed, about 9m 55s left`; without a total, the
-/// count and rate only. Rate and time left count from `first`, the count at the first report.
-fn progress_line(task: &str, done: u64, total: u64, first: u64, elapsed: Duration) -> String {
+/// count and rate only. The time left is at `rate` (`recent_rate`).
+fn progress_line(task: &str, done: u64, total: u64, rate: f64, elapsed: Duration) -> String {
     let secs = elapsed.as_secs_f64();
-    let rate = rate(done, first, secs);
     let mut line = format!("{task}: {done}");
     if total > 0 {
         let percent = 100.0 * done as f64 / total as f64;
@@ -199,22 +221,55 @@ fn clock(secs: f64) -> String {
 mod tests {
     use super::*;
 
+    /// The first line's rate: the average since the task's first report.
+    fn first_line(task: &str, done: u64, total: u64, first: u64, elapsed: Duration) -> String {
+        let r = recent_rate(None, rate(done, first, elapsed.as_secs_f64()), 0.0);
+        progress_line(task, done, total, r, elapsed)
+    }
+
     #[test]
     fn progress_lines_give_count_rate_and_time_left() {
-        let line = progress_line("train", 1200, 7000, 0, Duration::from_secs(123));
+        let line = first_line("train", 1200, 7000, 0, Duration::from_secs(123));
         assert_eq!(
             line,
             "train: 1200/7000 (17%), 9.8/s, 2m 03s elapsed, about 9m 55s left"
         );
-        let line = progress_line("load", 5, 0, 0, Duration::from_secs(4000));
+        let line = first_line("load", 5, 0, 0, Duration::from_secs(4000));
         assert_eq!(line, "load: 5, 800.0 s each, 1h 06m elapsed");
-        let line = progress_line("train", 0, 6, 0, Duration::from_secs(3));
+        let line = first_line("train", 0, 6, 0, Duration::from_secs(3));
         assert_eq!(line, "train: 0/6 (0%), 0.0/s, 3s elapsed");
+    }
+
+    /// A run that slows from 10/s to 1/s (lines every 10 s): within a few lines the time left
+    /// follows the new pace, where the average since the start (here 7.6/s after 50 s at 10/s
+    /// and 30 s at 1/s) would promise the end about 8× too early.
+    #[test]
+    fn time_left_follows_a_run_that_slows_down() {
+        let mut r = recent_rate(None, 10.0, 0.0);
+        for _ in 0..4 {
+            r = recent_rate(Some(r), 10.0, 10.0);
+        }
+        assert_eq!(r, 10.0);
+        for _ in 0..3 {
+            r = recent_rate(Some(r), 7.6, 1.0);
+        }
+        // 1 + 9 · 0.7³
+        assert!((r - 4.087).abs() < 1e-9, "{r}");
+        for _ in 0..7 {
+            r = recent_rate(Some(r), 7.6, 1.0);
+        }
+        // 1 + 9 · 0.7¹⁰
+        assert!((r - 1.2542).abs() < 1e-4, "{r}");
+        let line = progress_line("train", 1000, 2000, r, Duration::from_secs(150));
+        assert!(
+            line.ends_with("1.3/s, 2m 30s elapsed, about 13m 17s left"),
+            "{line}"
+        );
     }
 
     #[test]
     fn slow_work_reads_in_seconds_each() {
-        let line = progress_line("train", 2, 6, 0, Duration::from_secs(86));
+        let line = first_line("train", 2, 6, 0, Duration::from_secs(86));
         assert_eq!(
             line,
             "train: 2/6 (33%), 43.0 s each, 1m 26s elapsed, about 2m 52s left"
@@ -225,7 +280,7 @@ mod tests {
 
     #[test]
     fn a_resumed_task_counts_its_rate_from_where_it_resumed() {
-        let line = progress_line("train", 6000, 7000, 5000, Duration::from_secs(100));
+        let line = first_line("train", 6000, 7000, 5000, Duration::from_secs(100));
         assert_eq!(
             line,
             "train: 6000/7000 (86%), 10.0/s, 1m 40s elapsed, about 1m 40s left"
