@@ -117,7 +117,9 @@ pub struct LensArgs {
     /// A scene trained with --method cocog.
     pub scene: PathBuf,
     /// A transforms.json with per-frame `focus_distance_m` (and `aperture_radius_m`) to
-    /// compare with. Default: the one beside the photos' folder, when there is one.
+    /// compare with. Default: the one beside the photos' folder, when there is one. Its
+    /// poses give the scene unit in metres (camera centre distances), so the learned values
+    /// are compared in metres whatever the scene's units.
     #[arg(long)]
     pub truth: Option<PathBuf>,
 }

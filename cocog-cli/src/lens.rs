@@ -1,6 +1,7 @@
 //! `cocog lens SCENE`: the lens CoCoGaussian learned for every training photo, beside the
 //! true one when the dataset the photos came from records it (a `transforms.json` with
-//! `focus_distance_m` / `aperture_radius_m`, as the bench and the demo dataset have).
+//! `focus_distance_m` / `aperture_radius_m`, as the bench and the demo dataset have). The
+//! scene's units are measured against the truth's metres first (lens_units.rs).
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -10,6 +11,7 @@ use cocog_pipeline::{Scene, Split};
 use serde_json::{Value, json};
 
 use crate::cli::{Global, LensArgs};
+use crate::lens_units::{UnitScale, centre, unit_scale};
 
 /// One training photo's learned and (when known) true lens.
 struct Row {
@@ -25,6 +27,8 @@ pub struct LensReport {
     scene: PathBuf,
     rows: Vec<Row>,
     truth: Option<PathBuf>,
+    /// The scene unit measured in the truth's metres, where the two camera layouts allow.
+    units: Option<UnitScale>,
     /// Median relative focus error over the photos with a known focus.
     pub median: Option<f64>,
 }
@@ -49,18 +53,28 @@ impl LensReport {
             );
         }
         let truth = truth.or_else(|| find_transforms(&Scene::resolve(dir, &learned[0].0.image)));
-        let known = match &truth {
+        let (known, truth_centres) = match &truth {
             Some(path) => read_truth(path)?,
-            None => HashMap::new(),
+            None => Default::default(),
         };
+        let scene_centres = scene
+            .views
+            .iter()
+            .map(|v| (v.name.clone(), centre(&v.world_from_camera)))
+            .collect();
+        let units = unit_scale(&scene_centres, &truth_centres);
+        // Without a consistent measure the units are taken as metres, and the table says so.
+        let metres = units
+            .filter(UnitScale::consistent)
+            .map_or(1.0, |u| u.metres_per_unit);
         let rows: Vec<Row> = learned
             .iter()
             .map(|(v, l)| {
                 let t = known.get(&v.name);
                 Row {
                     name: v.name.clone(),
-                    focus: l.focus_distance,
-                    aperture: l.aperture,
+                    focus: metres * l.focus_distance,
+                    aperture: l.aperture.map(|a| metres * a),
                     true_focus: t.and_then(|t| t.0),
                     true_aperture: t.and_then(|t| t.1),
                 }
@@ -76,22 +90,38 @@ impl LensReport {
             scene: dir.to_owned(),
             rows,
             truth,
+            units,
             median,
         })
     }
 
+    /// Metres per scene unit as the comparison used them (1 where unmeasured).
+    fn metres(&self) -> f64 {
+        self.units
+            .filter(UnitScale::consistent)
+            .map_or(1.0, |u| u.metres_per_unit)
+    }
+
     pub fn table(&self) -> String {
-        table(&self.rows, self.median, self.truth.as_deref())
+        let units = self.truth.is_some().then(|| units_line(self.units));
+        table(&self.rows, self.median, self.truth.as_deref(), units)
     }
 
     pub fn to_json(&self) -> Value {
+        let m = self.metres();
         json!({
             "scene": self.scene,
             "truth": self.truth,
+            "metres_per_scene_unit": self.units.map(|u| u.metres_per_unit),
+            "camera_pairs": self.units.map(|u| u.pairs),
+            "camera_layout_spread": self.units.map(|u| u.spread),
+            "units_compared_as": m,
             "views": self.rows.iter().map(|r| json!({
                 "view": r.name,
-                "focus_distance": r.focus,
-                "aperture": r.aperture,
+                "focus_distance": r.focus / m,
+                "aperture": r.aperture.map(|a| a / m),
+                "focus_distance_m": r.focus,
+                "aperture_m": r.aperture,
                 "true_focus_distance": r.true_focus,
                 "true_aperture": r.true_aperture,
                 "focus_relative_error": r.true_focus.map(|t| rel(r.focus, t)),
@@ -115,7 +145,7 @@ pub fn run(a: &LensArgs, g: &Global) -> Result<()> {
     Ok(())
 }
 
-fn table(rows: &[Row], median: Option<f64>, truth: Option<&Path>) -> String {
+fn table(rows: &[Row], median: Option<f64>, truth: Option<&Path>, units: Option<String>) -> String {
     let has_aperture = rows.iter().any(|r| r.aperture.is_some());
     let has_truth = rows.iter().any(|r| r.true_focus.is_some());
     let mut out = String::from("view          focus");
@@ -146,11 +176,13 @@ fn table(rows: &[Row], median: Option<f64>, truth: Option<&Path>) -> String {
         }
         out += "\n";
     }
-    out += "focus: distance in focus from the camera centre (scene units)";
+    let unit = if has_truth { "metres" } else { "scene units" };
+    out += &format!("focus: distance in focus from the camera centre ({unit})");
     if has_aperture {
         out += "; aperture: its diameter";
     }
     out += "\n";
+    out += units.as_deref().unwrap_or_default();
     match (median, truth) {
         (Some(m), Some(t)) => {
             out += &format!(
@@ -172,18 +204,48 @@ fn find_transforms(image: &Path) -> Option<PathBuf> {
     t.is_file().then_some(t)
 }
 
+/// How the scene's units were related to the truth's metres.
+fn units_line(units: Option<UnitScale>) -> String {
+    match units {
+        Some(u) if u.consistent() => format!(
+            "scene unit = {:.4} m, measured by {} camera pairs (spread {:.1}%); learned values \
+             shown in metres\n",
+            u.metres_per_unit,
+            u.pairs,
+            100.0 * u.spread
+        ),
+        Some(u) => format!(
+            "warning: the scene's cameras and the truth's are not one similarity apart (pairs \
+             differ by {:.1}% in scale, more than {:.0}%); scene units taken as metres, so the \
+             errors may mean nothing\n",
+            100.0 * u.spread,
+            100.0 * crate::lens_units::MAX_SPREAD
+        ),
+        None => "warning: fewer than two photos have a pose in both the scene and the truth; \
+                 scene units taken as metres\n"
+            .to_owned(),
+    }
+}
+
 /// A photo's true focus distance and aperture diameter, where the dataset records them.
 type TrueLens = (Option<f64>, Option<f64>);
 
-/// Per photo file name, its true lens.
-fn read_truth(path: &Path) -> Result<HashMap<String, TrueLens>> {
+/// Per photo file name, its true lens and camera centre (metres).
+type Truth = (HashMap<String, TrueLens>, HashMap<String, [f64; 3]>);
+
+fn read_truth(path: &Path) -> Result<Truth> {
     let frames = cocog_formats::nerf::read_transforms(path, None)
         .with_context(|| format!("reading the true lenses from {}", path.display()))?;
-    Ok(frames
+    let centres = frames
+        .iter()
+        .map(|f| (f.image_name(), centre(&f.world_from_camera)))
+        .collect();
+    let lenses = frames
         .into_iter()
         .map(|f| {
             let lens = (f.focus_distance, f.aperture_radius.map(|r| 2.0 * r));
             (f.image_name(), lens)
         })
-        .collect())
+        .collect();
+    Ok((lenses, centres))
 }

@@ -6,6 +6,7 @@ mod cli;
 mod commands;
 mod demo;
 mod lens;
+mod lens_units;
 mod plugins;
 mod progress;
 mod sweep;

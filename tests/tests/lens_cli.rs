@@ -1,0 +1,127 @@
+//! `cocog lens` compares learned focus distances with a dataset's metres after measuring the
+//! scene's unit by the cameras both place, so a rescaled scene reads the same errors.
+
+use std::path::Path;
+
+use cocog_tests::{cocog, path_str, stderr, stdout, write_tiny_scene};
+use serde_json::{Value, json};
+
+const VIEWS: usize = 8;
+const RADIUS: f64 = 2.0;
+
+/// The tiny ring scene with photo-style names and a learned focus of RADIUS·(1 + i/100).
+fn scene(dir: &Path) -> Value {
+    write_tiny_scene(dir, VIEWS, [0.5, -1.0, 0.2], RADIUS);
+    let path = dir.join("scene.json");
+    let mut s: Value = serde_json::from_slice(&std::fs::read(&path).expect("read")).expect("json");
+    for (i, v) in s["views"]
+        .as_array_mut()
+        .expect("views")
+        .iter_mut()
+        .enumerate()
+    {
+        v["name"] = json!(format!("{i:03}.png"));
+        v["lens"]["focus_distance"] = json!(RADIUS * (1.0 + i as f64 / 100.0));
+    }
+    std::fs::write(&path, s.to_string()).expect("write");
+    s
+}
+
+/// A transforms.json placing the scene's cameras `metres` per scene unit apart (turned and
+/// moved as well), every photo truly focused at the ring's radius.
+fn truth(dir: &Path, scene: &Value, metres: f64, jitter: f64) -> std::path::PathBuf {
+    let frames: Vec<Value> = scene["views"]
+        .as_array()
+        .expect("views")
+        .iter()
+        .enumerate()
+        .map(|(i, v)| {
+            let t: Vec<f64> = (0..3)
+                .map(|r| v["world_from_camera"][r][3].as_f64().expect("t"))
+                .collect();
+            // A quarter turn about z, then an offset; `jitter` breaks the similarity.
+            let wobble = jitter * (i * i) as f64;
+            let c = [
+                -metres * t[1] + 3.0 + wobble,
+                metres * t[0] - 1.0,
+                metres * t[2] + 0.5,
+            ];
+            json!({
+                "file_path": format!("images/{i:03}.png"),
+                "transform_matrix": [
+                    [1.0, 0.0, 0.0, c[0]],
+                    [0.0, 1.0, 0.0, c[1]],
+                    [0.0, 0.0, 1.0, c[2]],
+                    [0.0, 0.0, 0.0, 1.0]
+                ],
+                "focus_distance_m": metres * RADIUS,
+            })
+        })
+        .collect();
+    let t = json!({ "camera_angle_x": 0.9, "w": 40, "h": 30, "frames": frames });
+    let path = dir.join(format!("transforms-{metres}-{jitter}.json"));
+    std::fs::write(&path, t.to_string()).expect("write transforms");
+    path
+}
+
+fn lens_json(scene: &Path, truth: &Path) -> Value {
+    let out = cocog(&[
+        "lens",
+        path_str(scene),
+        "--truth",
+        path_str(truth),
+        "--json",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    serde_json::from_str(&stdout(&out)).expect("lens JSON")
+}
+
+#[test]
+fn focus_errors_do_not_depend_on_the_scene_units() {
+    let work = tempfile::tempdir().expect("tempdir");
+    let s = scene(work.path());
+    // Train views are those not held out (every 8th is a test view in the tiny scene).
+    let train: Vec<usize> = (0..VIEWS).filter(|i| i % 8 != 0).collect();
+    let mut errors: Vec<f64> = train.iter().map(|&i| i as f64 / 100.0).collect();
+    errors.sort_by(f64::total_cmp);
+    let expected = errors[errors.len() / 2];
+    for metres in [0.1, 1.0, 25.0] {
+        let r = lens_json(work.path(), &truth(work.path(), &s, metres, 0.0));
+        let m = r["metres_per_scene_unit"].as_f64().expect("scale");
+        assert!((m / metres - 1.0).abs() < 1e-9, "{metres}: {r}");
+        assert_eq!(r["units_compared_as"].as_f64(), Some(m), "{r}");
+        let median = r["median_focus_relative_error"].as_f64().expect("median");
+        assert!(
+            (median - expected).abs() < 1e-9,
+            "{metres}: {median} vs {expected}"
+        );
+        let first = &r["views"][0];
+        let focus = first["focus_distance"].as_f64().expect("scene units");
+        let in_m = first["focus_distance_m"].as_f64().expect("metres");
+        assert!((in_m - metres * focus).abs() < 1e-9, "{first}");
+    }
+    let table = cocog(&[
+        "lens",
+        path_str(work.path()),
+        "--truth",
+        path_str(&truth(work.path(), &s, 0.1, 0.0)),
+    ]);
+    let text = stdout(&table);
+    assert!(text.contains("scene unit = 0.1000 m"), "{text}");
+}
+
+#[test]
+fn cameras_that_disagree_are_reported_and_units_kept() {
+    let work = tempfile::tempdir().expect("tempdir");
+    let s = scene(work.path());
+    let t = truth(work.path(), &s, 3.0, 0.2);
+    let r = lens_json(work.path(), &t);
+    assert!(
+        r["camera_layout_spread"].as_f64().expect("spread") > 0.02,
+        "{r}"
+    );
+    assert_eq!(r["units_compared_as"].as_f64(), Some(1.0), "{r}");
+    let out = cocog(&["lens", path_str(work.path()), "--truth", path_str(&t)]);
+    let text = stdout(&out);
+    assert!(text.contains("not one similarity apart"), "{text}");
+}
