@@ -43,7 +43,7 @@ fn check_sort(n: usize, modulo: u32, bits: u32, seed: u64) {
 fn check_sort_of(keys: Vec<u32>, bits: u32, drop: bool) {
     let Some(ctx) = gpu() else { return };
     let scan = PrefixSum::new(ctx);
-    let sort = RadixSort::new(ctx);
+    let sort = RadixSort::new(ctx, "test");
     let n = keys.len();
     let values: Vec<u32> = (0..n as u32).collect();
     let mut bufs = SortBuffers::new(
@@ -57,11 +57,8 @@ fn check_sort_of(keys: Vec<u32>, bits: u32, drop: bool) {
     let count = SortCount::Host(n as u32);
     // Set to garbage: the sort must write it.
     let kept = ctx.storage_from("kept", &[u32::MAX - 1; 4]);
-    if drop {
-        sort.encode_dropping_max(&mut rec, &mut ws, &scan, &mut bufs, count, bits, &kept);
-    } else {
-        sort.encode(&mut rec, &mut ws, &scan, &mut bufs, count, bits);
-    }
+    let kept_out = drop.then_some(&kept);
+    sort.encode(&mut rec, &mut ws, &scan, &mut bufs, count, bits, kept_out);
     rec.submit();
     // Stable sort on the low `bits` bits: ties keep their input order.
     let mask = if bits >= 32 {

@@ -62,17 +62,9 @@ pub enum SortCount<'a> {
 }
 
 impl RadixSort {
-    pub fn new(ctx: &GpuContext) -> Self {
-        let module = shader(ctx, "radix", include_str!("radix.wgsl"));
-        Self {
-            count: Kernel::new(ctx, &module, "count_digits"),
-            scatter: Kernel::new(ctx, &module, "scatter"),
-        }
-    }
-
     /// A sort whose kernels profile under their own names, e.g. "scatter (depth)", so a
     /// profile tells one sort of a pass from another.
-    pub fn labelled(ctx: &GpuContext, what: &str) -> Self {
+    pub fn new(ctx: &GpuContext, what: &str) -> Self {
         let module = shader(ctx, "radix", include_str!("radix.wgsl"));
         let kernel =
             |entry: &str| Kernel::labelled(ctx, &module, entry, &format!("{entry} ({what})"));
@@ -84,37 +76,13 @@ impl RadixSort {
 
     /// Records a stable sort of the pairs on the low `bits` key bits. Passes ping-pong through
     /// the scratch buffers; `bufs` ends up naming whichever pair holds the result.
-    pub fn encode(
-        &self,
-        rec: &mut Recorder,
-        ws: &mut Workspace,
-        prefix_sum: &PrefixSum,
-        bufs: &mut SortBuffers,
-        count: SortCount,
-        bits: u32,
-    ) {
-        self.encode_passes(rec, ws, prefix_sum, bufs, count, bits, None);
-    }
-
-    /// As `encode`, but the pairs whose key is `u32::MAX` are dropped: the sorted pairs are the
+    ///
+    /// With `kept`, the pairs whose key is `u32::MAX` are dropped: the sorted pairs are the
     /// first `kept[0]` of `bufs` (written on the GPU; past them the buffers hold scratch). The
     /// first pass sorts every pair and sets the dropped ones aside, the later passes only the
     /// kept ones — a depth sort where most Gaussians are culled costs about one full pass.
-    pub fn encode_dropping_max(
-        &self,
-        rec: &mut Recorder,
-        ws: &mut Workspace,
-        prefix_sum: &PrefixSum,
-        bufs: &mut SortBuffers,
-        count: SortCount,
-        bits: u32,
-        kept: &GpuBuffer,
-    ) {
-        self.encode_passes(rec, ws, prefix_sum, bufs, count, bits, Some(kept));
-    }
-
     #[allow(clippy::too_many_arguments)]
-    fn encode_passes(
+    pub fn encode(
         &self,
         rec: &mut Recorder,
         ws: &mut Workspace,

@@ -121,8 +121,8 @@ impl Renderer {
         let rasterize_backward_src = format!("{raster_bwd_src}\n{atomics}\n{flush}");
         Self {
             scan: PrefixSum::new(ctx),
-            depth_sort: RadixSort::labelled(ctx, "depth"),
-            tile_sort: RadixSort::labelled(ctx, "tiles"),
+            depth_sort: RadixSort::new(ctx, "depth"),
+            tile_sort: RadixSort::new(ctx, "tiles"),
             project: Kernel::new(ctx, &project, "project"),
             project_backward: Kernel::new(ctx, &project_bwd, "project_backward"),
             gather_counts: Kernel::new(ctx, &tiles, "gather_counts"),
@@ -257,14 +257,14 @@ impl Renderer {
         // key and are dropped by the sort's first pass: the later passes and the binning see
         // the visible ones only.
         let visible = ws.buffer(ctx, "visible count", 16);
-        self.depth_sort.encode_dropping_max(
+        self.depth_sort.encode(
             rec,
             ws,
             &self.scan,
             &mut by_depth,
             SortCount::Host(n),
             32,
-            &visible,
+            Some(&visible),
         );
         let total_tiles = tiles_x * tiles_y * batch.num_images();
         let params = rec.uniform(&TileParams {
@@ -322,7 +322,7 @@ impl Renderer {
             index: n,
         };
         self.tile_sort
-            .encode(rec, ws, &self.scan, &mut by_tile, count, tile_bits);
+            .encode(rec, ws, &self.scan, &mut by_tile, count, tile_bits, None);
         self.tile_ranges.dispatch_1d(
             rec,
             &[
