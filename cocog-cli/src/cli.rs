@@ -82,7 +82,7 @@ pub enum Command {
     Train(TrainArgs),
     /// Remove Gaussians whose depth-weighted opacity is too low.
     Prune(PruneArgs),
-    /// Write the trained Gaussians to a file other tools open (PLY, glTF).
+    /// Write the trained Gaussians to a file other tools open (PLY, glTF, SPZ).
     Export(ExportArgs),
     /// Render a trained scene's views to PNG, optionally with depth (EXR): sharp, or refocused
     /// through a CoCoGaussian scene's lens model.
@@ -513,6 +513,10 @@ pub enum ExportFormat {
     Ply,
     /// glTF binary with KHR_gaussian_splatting (three.js, Babylon.js).
     Glb,
+    /// Niantic SPZ (version 3, gzip), about a tenth of the PLY: SuperSplat, Spark, Babylon.js,
+    /// three.js. Stored in SPZ's RUB axes (turned 180° about X from the PLY's, as Niantic's
+    /// library converts PLY); positions to 2^-12 scene units within ±2048.
+    Spz,
 }
 
 #[derive(Args)]

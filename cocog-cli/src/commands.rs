@@ -158,6 +158,7 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
             let format = match a.format {
                 ExportFormat::Ply => "ply",
                 ExportFormat::Glb => "glb",
+                ExportFormat::Spz => "spz",
             };
             run(
                 "export",

@@ -16,6 +16,7 @@ pub mod ply;
 pub mod pose;
 pub mod rng;
 pub mod splats;
+pub mod spz;
 
 pub use atomic::write_atomic;
 pub use error::{FormatError, Result};

@@ -1,5 +1,5 @@
 //! cocog's exports in a real web 3DGS renderer: Babylon.js (`tests/browser`, npm) loads the
-//! `.ply` and the `.glb` (`KHR_gaussian_splatting`) in headless Chromium and renders the camera
+//! `.ply`, the `.glb` (`KHR_gaussian_splatting`) and the `.spz` in headless Chromium and renders the camera
 //! cocog rendered; the screenshots must match cocog's own render. The scene is made to catch
 //! convention slips: long thin Gaussians in every orientation (rotation order) and strong
 //! view-dependent colour to degree 3 (SH layout). A PLY with the quaternion's x and z swapped,
@@ -150,8 +150,8 @@ fn exports_render_in_a_web_viewer_as_cocog_renders_them() {
     let t = |name: &str| tmp.path().join(name);
     let splats = scene_splats();
     write_scene(&t("scene"), &splats);
-    let (ply, glb) = (t("scene.ply"), t("scene.glb"));
-    for (format, out) in [("ply", &ply), ("glb", &glb)] {
+    let (ply, glb, spz) = (t("scene.ply"), t("scene.glb"), t("scene.spz"));
+    for (format, out) in [("ply", &ply), ("glb", &glb), ("spz", &spz)] {
         let o = cocog(&[
             "export",
             path_str(&t("scene")),
@@ -166,18 +166,23 @@ fn exports_render_in_a_web_viewer_as_cocog_renders_them() {
     assert!(o.status.success(), "{}", stderr(&o));
     let reference = t("cocog").join("a.png");
 
-    // The PLY keeps cocog's world; the glTF is it turned 180° about z (its +Y up).
+    // The PLY keeps cocog's world; the glTF is it turned 180° about z (its +Y up), the SPZ
+    // 180° about x (its RUB axes; Babylon's own SPZ parser, not Niantic's library).
     camera_json(&t("cam-ply.json"), |p| p);
     camera_json(&t("cam-glb.json"), |p| [-p[0], -p[1], p[2]]);
+    camera_json(&t("cam-spz.json"), |p| [p[0], -p[1], -p[2]]);
     shoot(&ply, &t("cam-ply.json"), &t("ply.png"));
     shoot(&glb, &t("cam-glb.json"), &t("glb.png"));
-    let (p_ply, p_glb) = (
+    shoot(&spz, &t("cam-spz.json"), &t("spz.png"));
+    let (p_ply, p_glb, p_spz) = (
         psnr(&reference, &t("ply.png")),
         psnr(&reference, &t("glb.png")),
+        psnr(&reference, &t("spz.png")),
     );
-    eprintln!("Babylon.js vs cocog: PLY {p_ply:.2} dB, glTF {p_glb:.2} dB");
+    eprintln!("Babylon.js vs cocog: PLY {p_ply:.2} dB, glTF {p_glb:.2} dB, SPZ {p_spz:.2} dB");
     assert!(p_ply >= MIN_PSNR, "PLY: {p_ply:.2} dB < {MIN_PSNR}");
     assert!(p_glb >= MIN_PSNR, "glTF: {p_glb:.2} dB < {MIN_PSNR}");
+    assert!(p_spz >= MIN_PSNR, "SPZ: {p_spz:.2} dB < {MIN_PSNR}");
 
     // The same comparison catches a PLY written with the wrong conventions.
     let mut rotated = splats.clone();

@@ -1,8 +1,10 @@
 //! The `export` stage: writes a scene's Gaussians to one file, `.ply` (INRIA 3DGS, every viewer
-//! reads it) or `.glb` (glTF `KHR_gaussian_splatting`, the standards-track alternative).
+//! reads it), `.glb` (glTF `KHR_gaussian_splatting`, the standards-track alternative) or `.spz`
+//! (Niantic's compressed format, about a tenth of the PLY).
 
 use cocog_formats::glb::write_glb;
 use cocog_formats::ply::{read_splats, write_splats};
+use cocog_formats::spz::write_spz;
 use cocog_pipeline::{
     Context, OptionSpec, OutputKind, Scene, Stage, StageError, StageInfo, StageKind, StageRequest,
 };
@@ -26,16 +28,16 @@ impl Stage for Export {
             name: "export".to_owned(),
             kind: StageKind::Export,
             output: OutputKind::File,
-            description: "Write the scene's Gaussians as an INRIA 3DGS .ply or a glTF KHR_gaussian_splatting .glb".to_owned(),
-            options: vec![OptionSpec::string("format", "ply", "ply | glb")],
+            description: "Write the scene's Gaussians as an INRIA 3DGS .ply, a glTF KHR_gaussian_splatting .glb or a Niantic .spz".to_owned(),
+            options: vec![OptionSpec::string("format", "ply", "ply | glb | spz")],
         }
     }
 
     fn run(&self, req: &StageRequest, ctx: &dyn Context) -> Result<Value, StageError> {
         let format = req.options.get_str("format").unwrap_or("ply");
-        if !matches!(format, "ply" | "glb") {
+        if !matches!(format, "ply" | "glb" | "spz") {
             return Err(StageError::Options(format!(
-                "export: option 'format' must be ply or glb, got {format:?}"
+                "export: option 'format' must be ply, glb or spz, got {format:?}"
             )));
         }
         let scene = Scene::load(&req.input)?;
@@ -46,6 +48,7 @@ impl Stage for Export {
             .map_err(|e| StageError::Input(e.to_string()))?;
         let result = match format {
             "ply" => write_splats(&req.output, &splats, scene.up.map(axis_name).as_deref()),
+            "spz" => write_spz(&req.output, &splats),
             _ => write_glb(&req.output, &splats),
         };
         result.map_err(|e| StageError::Input(e.to_string()))?;
