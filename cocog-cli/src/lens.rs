@@ -11,7 +11,7 @@ use cocog_pipeline::{Scene, Split};
 use serde_json::{Value, json};
 
 use crate::cli::{Global, LensArgs};
-use crate::lens_units::{UnitScale, centre, unit_scale};
+use crate::lens_units::{MIN_PAIRS, UnitScale, centre, median, unit_scale};
 
 /// One training photo's learned and (when known) true lens.
 struct Row {
@@ -60,17 +60,19 @@ impl LensReport {
         let scene_centres = scene
             .views
             .iter()
-            .map(|v| (v.name.clone(), centre(&v.world_from_camera)))
+            .map(|v| (file_name(&v.name), centre(&v.world_from_camera)))
             .collect();
-        let units = unit_scale(&scene_centres, &truth_centres);
+        // Units matter only where there is a true lens to compare with.
+        let has_lens = known.values().any(|t| t.0.is_some() || t.1.is_some());
+        let units = has_lens
+            .then(|| unit_scale(&scene_centres, &truth_centres))
+            .flatten();
         // Without a consistent measure the units are taken as metres, and the table says so.
-        let metres = units
-            .filter(UnitScale::consistent)
-            .map_or(1.0, |u| u.metres_per_unit);
+        let metres = metres_of(units);
         let rows: Vec<Row> = learned
             .iter()
             .map(|(v, l)| {
-                let t = known.get(&v.name);
+                let t = known.get(&file_name(&v.name));
                 Row {
                     name: v.name.clone(),
                     focus: metres * l.focus_distance,
@@ -84,8 +86,7 @@ impl LensReport {
             .iter()
             .filter_map(|r| r.true_focus.map(|t| rel(r.focus, t)))
             .collect();
-        errors.sort_by(f64::total_cmp);
-        let median = (!errors.is_empty()).then(|| errors[errors.len() / 2]);
+        let median = (!errors.is_empty()).then(|| median(&mut errors));
         Ok(Self {
             scene: dir.to_owned(),
             rows,
@@ -95,20 +96,16 @@ impl LensReport {
         })
     }
 
-    /// Metres per scene unit as the comparison used them (1 where unmeasured).
-    fn metres(&self) -> f64 {
-        self.units
-            .filter(UnitScale::consistent)
-            .map_or(1.0, |u| u.metres_per_unit)
-    }
-
     pub fn table(&self) -> String {
-        let units = self.truth.is_some().then(|| units_line(self.units));
+        let has_truth = self.rows.iter().any(|r| r.true_focus.is_some());
+        let units = has_truth.then(|| units_line(self.units));
         table(&self.rows, self.median, self.truth.as_deref(), units)
     }
 
     pub fn to_json(&self) -> Value {
-        let m = self.metres();
+        let m = metres_of(self.units);
+        // Metre values only where the scene unit was measured.
+        let measured = self.units.is_some_and(|u| u.consistent());
         json!({
             "scene": self.scene,
             "truth": self.truth,
@@ -120,8 +117,8 @@ impl LensReport {
                 "view": r.name,
                 "focus_distance": r.focus / m,
                 "aperture": r.aperture.map(|a| a / m),
-                "focus_distance_m": r.focus,
-                "aperture_m": r.aperture,
+                "focus_distance_m": measured.then_some(r.focus),
+                "aperture_m": r.aperture.filter(|_| measured),
                 "true_focus_distance": r.true_focus,
                 "true_aperture": r.true_aperture,
                 "focus_relative_error": r.true_focus.map(|t| rel(r.focus, t)),
@@ -204,6 +201,21 @@ fn find_transforms(image: &Path) -> Option<PathBuf> {
     t.is_file().then_some(t)
 }
 
+/// Metres per scene unit as the comparison uses them (1 where unmeasured).
+fn metres_of(units: Option<UnitScale>) -> f64 {
+    units
+        .filter(UnitScale::consistent)
+        .map_or(1.0, |u| u.metres_per_unit)
+}
+
+/// A photo's key on both sides: its file name without folders (scenes keep a dataset's
+/// subfolders in view names; transforms.json paths carry theirs).
+fn file_name(name: &str) -> String {
+    Path::new(name)
+        .file_name()
+        .map_or_else(|| name.to_owned(), |n| n.to_string_lossy().into_owned())
+}
+
 /// How the scene's units were related to the truth's metres.
 fn units_line(units: Option<UnitScale>) -> String {
     match units {
@@ -214,6 +226,11 @@ fn units_line(units: Option<UnitScale>) -> String {
             u.pairs,
             100.0 * u.spread
         ),
+        Some(u) if u.pairs < MIN_PAIRS => format!(
+            "warning: only {} camera pair(s) in both the scene and the truth, too few to check \
+             that they agree; scene units taken as metres\n",
+            u.pairs
+        ),
         Some(u) => format!(
             "warning: the scene's cameras and the truth's are not one similarity apart (pairs \
              differ by {:.1}% in scale, more than {:.0}%); scene units taken as metres, so the \
@@ -221,8 +238,8 @@ fn units_line(units: Option<UnitScale>) -> String {
             100.0 * u.spread,
             100.0 * crate::lens_units::MAX_SPREAD
         ),
-        None => "warning: fewer than two photos have a pose in both the scene and the truth; \
-                 scene units taken as metres\n"
+        None => "warning: fewer than two photos have distinct poses in both the scene and the \
+                 truth; scene units taken as metres\n"
             .to_owned(),
     }
 }
@@ -236,11 +253,20 @@ type Truth = (HashMap<String, TrueLens>, HashMap<String, [f64; 3]>);
 fn read_truth(path: &Path) -> Result<Truth> {
     let frames = cocog_formats::nerf::read_transforms(path, None)
         .with_context(|| format!("reading the true lenses from {}", path.display()))?;
-    let centres = frames
+    // A file name in two frames (Blender's train/r_0 and test/r_0) names neither for sure.
+    let mut seen = HashMap::new();
+    for f in &frames {
+        *seen.entry(f.image_name()).or_insert(0) += 1;
+    }
+    let unique: Vec<_> = frames
+        .into_iter()
+        .filter(|f| seen[&f.image_name()] == 1)
+        .collect();
+    let centres = unique
         .iter()
         .map(|f| (f.image_name(), centre(&f.world_from_camera)))
         .collect();
-    let lenses = frames
+    let lenses = unique
         .into_iter()
         .map(|f| {
             let lens = (f.focus_distance, f.aperture_radius.map(|r| 2.0 * r));

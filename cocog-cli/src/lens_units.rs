@@ -23,10 +23,12 @@ pub struct UnitScale {
 
 /// The layouts are taken as one similarity apart only within this spread.
 pub const MAX_SPREAD: f64 = 0.02;
+/// Fewer pairs cannot show a disagreement (two cameras make one pair, whose spread is 0).
+pub const MIN_PAIRS: usize = 3;
 
 impl UnitScale {
     pub fn consistent(&self) -> bool {
-        self.spread <= MAX_SPREAD
+        self.pairs >= MIN_PAIRS && self.spread <= MAX_SPREAD
     }
 }
 
@@ -38,17 +40,24 @@ pub fn unit_scale(
 ) -> Option<UnitScale> {
     let mut names: Vec<&String> = scene.keys().filter(|n| truth.contains_key(*n)).collect();
     names.sort();
-    let mut ratios = Vec::new();
+    let mut pairs = Vec::new();
     for (i, a) in names.iter().enumerate() {
         for b in &names[i + 1..] {
-            let units = distance(scene[*a], scene[*b]);
-            let metres = distance(truth[*a], truth[*b]);
-            // Coincident centres (a rig, repeated frames) carry no length.
-            if units > 1e-9 && metres > 1e-9 {
-                ratios.push(metres / units);
-            }
+            pairs.push((
+                distance(scene[*a], scene[*b]),
+                distance(truth[*a], truth[*b]),
+            ));
         }
     }
+    // Coincident centres (a rig, repeated frames) carry no length; "coincident" relative to
+    // each layout's size, as units are arbitrary.
+    let far = |f: fn(&(f64, f64)) -> f64| pairs.iter().map(f).fold(0.0, f64::max);
+    let (units_far, metres_far) = (far(|p| p.0), far(|p| p.1));
+    let mut ratios: Vec<f64> = pairs
+        .iter()
+        .filter(|(u, m)| *u > 1e-9 * units_far && *m > 1e-9 * metres_far)
+        .map(|(u, m)| m / u)
+        .collect();
     if ratios.is_empty() {
         return None;
     }
@@ -78,7 +87,8 @@ fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
         .sqrt()
 }
 
-fn median(v: &mut [f64]) -> f64 {
+/// The middle value, or the mean of the two middle ones (`v` non-empty; sorted in place).
+pub fn median(v: &mut [f64]) -> f64 {
     v.sort_by(f64::total_cmp);
     let n = v.len();
     if n % 2 == 1 {
@@ -129,6 +139,11 @@ mod tests {
             assert_eq!(u.pairs, 15);
             assert!(u.spread < 1e-12 && u.consistent(), "{u:?}");
         }
+        // Two cameras make one pair: agreement cannot be checked.
+        let two: HashMap<_, _> = scene.iter().take(2).map(|(n, p)| (n.clone(), *p)).collect();
+        let u = unit_scale(&two, &similar(&two, 3.0)).expect("one pair");
+        assert_eq!(u.pairs, 1);
+        assert!(!u.consistent());
     }
 
     #[test]

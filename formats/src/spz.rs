@@ -150,7 +150,8 @@ fn unit_byte(v: f32) -> u8 {
 /// round(x·128) + 128 on a grid of 2^(8 − bits), as the library quantises.
 fn sh_byte(x: f32, bits: u32) -> u8 {
     let bucket = 1i32 << (8 - bits);
-    let q = (x * 128.0).round() as i32 + 128;
+    // Clamped before the cast: a huge coefficient must not saturate and overflow the sum.
+    let q = ((x * 128.0).round() + 128.0).clamp(-1024.0, 1024.0) as i32;
     let q = (q + bucket / 2) / bucket * bucket;
     q.clamp(0, 255) as u8
 }
@@ -238,6 +239,8 @@ mod tests {
         assert_eq!(sh_byte(1.5, 4), 255);
         assert_eq!(sh_byte(-2.0, 4), 0);
         assert_eq!(sh_byte(0.1, 5) % 8, 0);
+        assert_eq!(sh_byte(3.0e9, 4), 255);
+        assert_eq!(sh_byte(-3.0e9, 5), 0);
         assert_eq!(unit_byte(-3.0), 0);
         assert_eq!(unit_byte(300.0), 255);
     }
@@ -257,6 +260,12 @@ mod tests {
             e.contains("splats.means[1]") && e.contains("fixed-point"),
             "{e}"
         );
+        // The range is ±(2^23 − 1)·2^-12: 2047.9 fits, 2048.1 does not.
+        s.means[1] = -2047.9;
+        write_spz(&path, &s).expect("inside the range");
+        s.means[1] = 2048.1;
+        write_spz(&path, &s).expect_err("just outside the range");
+        std::fs::remove_file(&path).expect("remove");
         s.means[1] = f32::NAN;
         let e = write_spz(&path, &s).expect_err("NaN").to_string();
         assert!(e.contains("splats.means[1]"), "{e}");
