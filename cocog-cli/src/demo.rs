@@ -147,6 +147,12 @@ pub fn run(registry: &Registry, a: &DemoArgs, g: &Global, ctx: &dyn Context) -> 
         "scene.glb",
         obj(json!({"format": "glb"})),
     )?;
+    let (spz, _, _) = step(
+        "export",
+        &pruned,
+        "scene.spz",
+        obj(json!({"format": "spz"})),
+    )?;
     let scoring = json!({});
     let (_, plain_scores, _) = step(
         "eval-scene",
@@ -191,6 +197,7 @@ pub fn run(registry: &Registry, a: &DemoArgs, g: &Global, ctx: &dyn Context) -> 
                 &ply,
             ),
             ("exported as glTF KHR_gaussian_splatting", &glb),
+            ("exported as SPZ (compressed)", &spz),
         ] {
             out += &format!("  {:<56}{}\n", what, path.display());
         }

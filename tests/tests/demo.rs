@@ -19,6 +19,7 @@ fn demo_generates_its_dataset_and_runs_the_available_stages() {
         "dataset",
         "scene.ply",
         "scene.glb",
+        "scene.spz",
         "metrics-3dgs.json",
         "metrics-cocog.json",
         "refocus.gif",
