@@ -50,7 +50,7 @@ fn export(
 }
 
 #[test]
-fn exports_ply_and_glb() {
+fn exports_ply_glb_and_spz() {
     let tmp = tempfile::tempdir().unwrap();
     let s = scene_with_gaussians(&tmp.path().join("scene"), true);
     let ply = tmp.path().join("out.ply");
@@ -66,10 +66,19 @@ fn exports_ply_and_glb() {
         (back.means, back.sh_dc, back.sh_rest),
         (s.means, s.sh_dc, s.sh_rest)
     );
-    let err = export(&tmp.path().join("scene"), &tmp.path().join("x.spz"), "spz")
-        .unwrap_err()
-        .to_string();
-    assert!(err.contains("ply or glb"), "{err}");
+    let spz = tmp.path().join("out.spz");
+    let summary = export(&tmp.path().join("scene"), &spz, "spz").unwrap();
+    assert_eq!(summary["format"], "spz");
+    // gzip, which holds the header's "NGSP".
+    assert_eq!(&std::fs::read(&spz).unwrap()[..2], &[0x1f, 0x8b]);
+    let err = export(
+        &tmp.path().join("scene"),
+        &tmp.path().join("x.splat"),
+        "splat",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("ply, glb or spz"), "{err}");
 }
 
 #[test]
