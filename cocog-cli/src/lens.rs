@@ -76,7 +76,9 @@ impl LensReport {
                 Row {
                     name: v.name.clone(),
                     focus: metres * l.focus_distance,
-                    aperture: l.aperture.map(|a| metres * a),
+                    // The sign of a learned aperture is a symmetry (it flips the copies'
+                    // offsets, which h_θ's directions absorb); the diameter is its magnitude.
+                    aperture: l.aperture.map(|a| metres * a.abs()),
                     true_focus: t.and_then(|t| t.0),
                     true_aperture: t.and_then(|t| t.1),
                 }

@@ -22,6 +22,8 @@ fn scene(dir: &Path) -> Value {
     {
         v["name"] = json!(format!("{i:03}.png"));
         v["lens"]["focus_distance"] = json!(RADIUS * (1.0 + i as f64 / 100.0));
+        // A learned aperture may come out negative: the report gives the diameter.
+        v["lens"]["aperture"] = json!(if i % 2 == 0 { -0.25 } else { 0.25 });
     }
     std::fs::write(&path, s.to_string()).expect("write");
     s
@@ -99,6 +101,10 @@ fn focus_errors_do_not_depend_on_the_scene_units() {
         let focus = first["focus_distance"].as_f64().expect("scene units");
         let in_m = first["focus_distance_m"].as_f64().expect("metres");
         assert!((in_m - metres * focus).abs() < 1e-9, "{first}");
+        for v in r["views"].as_array().expect("views") {
+            let a = v["aperture_m"].as_f64().expect("aperture");
+            assert!((a - metres * 0.25).abs() < 1e-9, "{v}");
+        }
     }
     let table = cocog(&[
         "lens",
