@@ -54,6 +54,21 @@ impl Splats {
         sh_rest_per_channel(self.sh_degree)
     }
 
+    /// The first NaN or infinite value as (field, flat index), for writers whose format
+    /// cannot hold one.
+    pub fn first_non_finite(&self) -> Option<(&'static str, usize)> {
+        [
+            ("means", &self.means),
+            ("log_scales", &self.log_scales),
+            ("rotations", &self.rotations),
+            ("opacities", &self.opacities),
+            ("sh_dc", &self.sh_dc),
+            ("sh_rest", &self.sh_rest),
+        ]
+        .into_iter()
+        .find_map(|(name, v)| v.iter().position(|x| !x.is_finite()).map(|i| (name, i)))
+    }
+
     /// Checks that every vector has the length `len()` implies, or says which one does not.
     pub fn check(&self) -> Result<(), String> {
         if self.sh_degree > 3 {

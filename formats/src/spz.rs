@@ -38,21 +38,12 @@ pub fn write_spz(path: &Path, splats: &Splats) -> Result<()> {
         .check()
         .map_err(|e| FormatError::invalid(path, "splats", e))?;
     let limit = f64::from((1u32 << 23) - 1) / f64::from(1u32 << FRACTIONAL_BITS);
-    for (name, v) in [
-        ("means", &splats.means),
-        ("log_scales", &splats.log_scales),
-        ("rotations", &splats.rotations),
-        ("opacities", &splats.opacities),
-        ("sh_dc", &splats.sh_dc),
-        ("sh_rest", &splats.sh_rest),
-    ] {
-        if let Some(i) = v.iter().position(|x| !x.is_finite()) {
-            return Err(FormatError::invalid(
-                path,
-                format!("splats.{name}[{i}]"),
-                "is NaN or infinite",
-            ));
-        }
+    if let Some((name, i)) = splats.first_non_finite() {
+        return Err(FormatError::invalid(
+            path,
+            format!("splats.{name}[{i}]"),
+            "is NaN or infinite",
+        ));
     }
     if let Some(i) = splats.means.iter().position(|x| f64::from(x.abs()) > limit) {
         return Err(FormatError::invalid(

@@ -66,21 +66,12 @@ pub fn write_glb(path: &Path, splats: &Splats) -> Result<()> {
             "no splats to write (glTF accessors need count ≥ 1)",
         ));
     }
-    for (name, v) in [
-        ("means", &splats.means),
-        ("log_scales", &splats.log_scales),
-        ("rotations", &splats.rotations),
-        ("opacities", &splats.opacities),
-        ("sh_dc", &splats.sh_dc),
-        ("sh_rest", &splats.sh_rest),
-    ] {
-        if let Some(i) = v.iter().position(|x| !x.is_finite()) {
-            return Err(FormatError::invalid(
-                path,
-                format!("splats.{name}[{i}]"),
-                "is NaN or infinite",
-            ));
-        }
+    if let Some((name, i)) = splats.first_non_finite() {
+        return Err(FormatError::invalid(
+            path,
+            format!("splats.{name}[{i}]"),
+            "is NaN or infinite",
+        ));
     }
     let mut s = splats.clone();
     rotate_z180(&mut s, false);
