@@ -88,6 +88,37 @@ pub fn listing(dir: &Path) -> Vec<String> {
     v
 }
 
+/// Whether a test whose outside tool is missing (`why`) should skip: it prints the reason and
+/// skips, except under `CI=true`, where the tool must be there (`.ci/run` installs every one) and
+/// its absence fails the test.
+pub fn skip_because(why: Option<String>) -> bool {
+    let Some(why) = why else { return false };
+    assert!(
+        std::env::var("CI").as_deref() != Ok("true"),
+        "CI=true but this test cannot run: {why}"
+    );
+    eprintln!("skipped: {why}");
+    true
+}
+
+/// `tests/browser`: the Node project of the web-viewer and SPZ reference checks.
+pub fn browser_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("browser")
+}
+
+/// Why Node cannot load `package` from `tests/browser`, if it cannot.
+pub fn node_package_missing(package: &str) -> Option<String> {
+    if Command::new("node").arg("--version").output().is_err() {
+        return Some("no Node.js (apt-get install nodejs npm)".into());
+    }
+    if !browser_dir().join("node_modules").join(package).is_dir() {
+        return Some(format!(
+            "tests/browser has no node_modules/{package} (npm ci --prefix tests/browser)"
+        ));
+    }
+    None
+}
+
 /// `../shared` beside the workspace, if this checkout has it.
 pub fn shared_dir() -> Option<PathBuf> {
     let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared");

@@ -8,12 +8,12 @@
 //! Needs Node.js, `npm ci` in tests/browser and Debian's chromium (`.ci/run` installs them);
 //! without CI=true a missing one skips with the reason.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 use cocog_formats::rng::SplitMix64;
 use cocog_formats::splats::Splats;
-use cocog_tests::{cocog, path_str, stderr};
+use cocog_tests::{browser_dir, cocog, node_package_missing, path_str, skip_because, stderr};
 use serde_json::json;
 
 const W: u32 = 160;
@@ -25,10 +25,6 @@ const F: f64 = 130.0;
 /// the broken ones.
 const MIN_PSNR: f64 = 21.0;
 
-fn browser_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("browser")
-}
-
 /// Why the browser test cannot run here, if it cannot.
 fn missing() -> Option<String> {
     let chromium = std::env::var("COCOG_CHROMIUM").unwrap_or_else(|_| "/usr/bin/chromium".into());
@@ -37,13 +33,7 @@ fn missing() -> Option<String> {
             "no Chromium at {chromium} (apt-get install chromium)"
         ));
     }
-    if Command::new("node").arg("--version").output().is_err() {
-        return Some("no Node.js (apt-get install nodejs npm)".into());
-    }
-    if !browser_dir().join("node_modules/babylonjs").is_dir() {
-        return Some("tests/browser has no node_modules (npm ci --prefix tests/browser)".into());
-    }
-    None
+    node_package_missing("babylonjs")
 }
 
 /// 400 long thin Gaussians in front of an identity camera, SH degree 3 with large
@@ -138,12 +128,7 @@ fn psnr(a: &Path, b: &Path) -> f64 {
 
 #[test]
 fn exports_render_in_a_web_viewer_as_cocog_renders_them() {
-    if let Some(why) = missing() {
-        assert!(
-            std::env::var("CI").as_deref() != Ok("true"),
-            "CI=true but the browser test cannot run: {why}"
-        );
-        eprintln!("skipped: {why}");
+    if skip_because(missing()) {
         return;
     }
     let tmp = tempfile::tempdir().unwrap();

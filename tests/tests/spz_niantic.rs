@@ -7,42 +7,16 @@
 //! Needs Node.js and `npm ci --prefix tests/browser` (`.ci/run` does both); without CI=true a
 //! missing one skips with the reason.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 use cocog_formats::rng::SplitMix64;
 use cocog_formats::splats::{Splats, sigmoid};
 use cocog_formats::spz::write_spz;
-use cocog_tests::{cocog, path_str, scene_with_gaussians, stderr};
+use cocog_tests::{
+    browser_dir, cocog, node_package_missing, path_str, scene_with_gaussians, skip_because, stderr,
+};
 use serde_json::Value;
-
-fn browser_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("browser")
-}
-
-fn missing() -> Option<String> {
-    if Command::new("node").arg("--version").output().is_err() {
-        return Some("no Node.js (apt-get install nodejs npm)".into());
-    }
-    if !browser_dir().join("node_modules/@adobe/spz").is_dir() {
-        return Some("tests/browser has no node_modules (npm ci --prefix tests/browser)".into());
-    }
-    None
-}
-
-fn skip() -> bool {
-    match missing() {
-        None => false,
-        Some(why) => {
-            assert!(
-                std::env::var("CI").as_deref() != Ok("true"),
-                "CI=true but the SPZ reference reader cannot run: {why}"
-            );
-            eprintln!("skipped: {why}");
-            true
-        }
-    }
-}
 
 fn niantic_read(file: &Path) -> Value {
     let o = Command::new("node")
@@ -101,7 +75,7 @@ fn check_close(what: &str, i: usize, got: f64, want: f64, step: f64) {
 
 #[test]
 fn niantic_reads_back_what_cocog_wrote() {
-    if skip() {
+    if skip_because(node_package_missing("@adobe/spz")) {
         return;
     }
     let dir = tempfile::tempdir().expect("tempdir");
@@ -188,7 +162,7 @@ fn niantic_reads_back_what_cocog_wrote() {
 
 #[test]
 fn export_writes_spz_that_niantic_reads() {
-    if skip() {
+    if skip_because(node_package_missing("@adobe/spz")) {
         return;
     }
     let dir = tempfile::tempdir().expect("tempdir");
