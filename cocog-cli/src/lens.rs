@@ -3,7 +3,7 @@
 //! `focus_distance_m` / `aperture_radius_m`, as the bench and the demo dataset have). The
 //! scene's units are measured against the truth's metres first (lens_units.rs).
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, Result, bail};
@@ -57,10 +57,12 @@ impl LensReport {
             Some(path) => read_truth(path)?,
             None => Default::default(),
         };
+        let keys = unique_keys(scene.views.iter().map(|v| v.name.as_str()));
+        let key = |name: &str| Some(photo_key(name)).filter(|k| keys.contains(k));
         let scene_centres = scene
             .views
             .iter()
-            .map(|v| (file_name(&v.name), centre(&v.world_from_camera)))
+            .filter_map(|v| Some((key(&v.name)?, centre(&v.world_from_camera))))
             .collect();
         // Units matter only where there is a true lens to compare with.
         let has_lens = known.values().any(|t| t.0.is_some() || t.1.is_some());
@@ -72,7 +74,7 @@ impl LensReport {
         let rows: Vec<Row> = learned
             .iter()
             .map(|(v, l)| {
-                let t = known.get(&file_name(&v.name));
+                let t = key(&v.name).and_then(|k| known.get(&k));
                 Row {
                     name: v.name.clone(),
                     focus: metres * l.focus_distance,
@@ -210,12 +212,24 @@ fn metres_of(units: Option<UnitScale>) -> f64 {
         .map_or(1.0, |u| u.metres_per_unit)
 }
 
-/// A photo's key on both sides: its file name without folders (scenes keep a dataset's
-/// subfolders in view names; transforms.json paths carry theirs).
-fn file_name(name: &str) -> String {
+/// A photo's key on both sides: its file name without folders or extension. Scenes keep a
+/// dataset's subfolders in view names, transforms.json paths carry theirs, and the same photo
+/// is often a `.JPG` in one and a `.png` (or no extension) in the other.
+fn photo_key(name: &str) -> String {
     Path::new(name)
-        .file_name()
+        .file_stem()
         .map_or_else(|| name.to_owned(), |n| n.to_string_lossy().into_owned())
+}
+
+/// The keys that name exactly one of `names` (a key shared by two photos names neither).
+fn unique_keys<'a>(names: impl Iterator<Item = &'a str>) -> HashSet<String> {
+    let mut seen: HashMap<String, usize> = HashMap::new();
+    for n in names {
+        *seen.entry(photo_key(n)).or_insert(0) += 1;
+    }
+    seen.into_iter()
+        .filter_map(|(k, c)| (c == 1).then_some(k))
+        .collect()
 }
 
 /// How the scene's units were related to the truth's metres.
@@ -255,25 +269,22 @@ type Truth = (HashMap<String, TrueLens>, HashMap<String, [f64; 3]>);
 fn read_truth(path: &Path) -> Result<Truth> {
     let frames = cocog_formats::nerf::read_transforms(path, None)
         .with_context(|| format!("reading the true lenses from {}", path.display()))?;
-    // A file name in two frames (Blender's train/r_0 and test/r_0) names neither for sure.
-    let mut seen = HashMap::new();
-    for f in &frames {
-        *seen.entry(f.image_name()).or_insert(0) += 1;
-    }
+    // A name in two frames (Blender's train/r_0 and test/r_0) names neither for sure.
+    let keys = unique_keys(frames.iter().map(|f| f.file_path.as_str()));
     let unique: Vec<_> = frames
         .into_iter()
-        .filter(|f| seen[&f.image_name()] == 1)
+        .filter_map(|f| {
+            let k = photo_key(&f.file_path);
+            keys.contains(&k).then_some((k, f))
+        })
         .collect();
     let centres = unique
         .iter()
-        .map(|f| (f.image_name(), centre(&f.world_from_camera)))
+        .map(|(k, f)| (k.clone(), centre(&f.world_from_camera)))
         .collect();
     let lenses = unique
         .into_iter()
-        .map(|f| {
-            let lens = (f.focus_distance, f.aperture_radius.map(|r| 2.0 * r));
-            (f.image_name(), lens)
-        })
+        .map(|(k, f)| (k, (f.focus_distance, f.aperture_radius.map(|r| 2.0 * r))))
         .collect();
     Ok((lenses, centres))
 }

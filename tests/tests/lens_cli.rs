@@ -32,6 +32,17 @@ fn scene(dir: &Path) -> Value {
 /// A transforms.json placing the scene's cameras `metres` per scene unit apart (turned and
 /// moved as well), every photo truly focused at the ring's radius.
 fn truth(dir: &Path, scene: &Value, metres: f64, jitter: f64) -> std::path::PathBuf {
+    truth_named(dir, scene, metres, jitter, |i| format!("images/{i:03}.png"))
+}
+
+/// The same, with photo `i` at `file_path(i)`.
+fn truth_named(
+    dir: &Path,
+    scene: &Value,
+    metres: f64,
+    jitter: f64,
+    file_path: fn(usize) -> String,
+) -> std::path::PathBuf {
     let frames: Vec<Value> = scene["views"]
         .as_array()
         .expect("views")
@@ -49,7 +60,7 @@ fn truth(dir: &Path, scene: &Value, metres: f64, jitter: f64) -> std::path::Path
                 metres * t[2] + 0.5,
             ];
             json!({
-                "file_path": format!("images/{i:03}.png"),
+                "file_path": file_path(i),
                 "transform_matrix": [
                     [1.0, 0.0, 0.0, c[0]],
                     [0.0, 1.0, 0.0, c[1]],
@@ -61,7 +72,10 @@ fn truth(dir: &Path, scene: &Value, metres: f64, jitter: f64) -> std::path::Path
         })
         .collect();
     let t = json!({ "camera_angle_x": 0.9, "w": 40, "h": 30, "frames": frames });
-    let path = dir.join(format!("transforms-{metres}-{jitter}.json"));
+    let path = dir.join(format!(
+        "transforms-{metres}-{jitter}-{}.json",
+        file_path(1).len()
+    ));
     std::fs::write(&path, t.to_string()).expect("write transforms");
     path
 }
@@ -130,4 +144,33 @@ fn cameras_that_disagree_are_reported_and_units_kept() {
     let out = cocog(&["lens", path_str(work.path()), "--truth", path_str(&t)]);
     let text = stdout(&out);
     assert!(text.contains("not one similarity apart"), "{text}");
+}
+
+#[test]
+fn photos_match_by_name_whatever_their_folder_and_extension() {
+    let work = tempfile::tempdir().expect("tempdir");
+    let s = scene(work.path());
+    // Blender's style: no extension, the split as the folder; the scene has `NNN.png`.
+    let t = truth_named(work.path(), &s, 2.0, 0.0, |i| format!("./train/{i:03}"));
+    let r = lens_json(work.path(), &t);
+    assert_eq!(
+        r["camera_pairs"].as_u64(),
+        Some((VIEWS * (VIEWS - 1) / 2) as u64),
+        "{r}"
+    );
+    assert!(r["median_focus_relative_error"].as_f64().is_some(), "{r}");
+    // Frame 2 is a `.jpg` of photo 001: the two frames name 001 twice, so neither names it.
+    let t = truth_named(work.path(), &s, 2.0, 0.0, |i| match i {
+        2 => "images/001.jpg".into(),
+        _ => format!("images/{i:03}.png"),
+    });
+    let r = lens_json(work.path(), &t);
+    let truths: Vec<bool> = r["views"]
+        .as_array()
+        .expect("views")
+        .iter()
+        .map(|v| !v["true_focus_distance"].is_null())
+        .collect();
+    // Views 001…007 (000 is held out): 001 ambiguous, 002 absent, the rest matched.
+    assert_eq!(truths, [false, false, true, true, true, true, true], "{r}");
 }
