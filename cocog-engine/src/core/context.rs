@@ -24,6 +24,11 @@ pub struct GpuContext {
     pub subgroups: bool,
     /// WGSL `f16` in storage buffers: F keeps its feature maps in half precision.
     pub shader_f16: bool,
+    /// The matrix multiply-add shapes the adapter runs cooperatively (tensor cores), as
+    /// `VK_KHR_cooperative_matrix` reports them; wgpu exposes them to WGSL as an experimental
+    /// feature, which the engine does not enable yet. Recorded so benchmarks say what a
+    /// device could give F's convolutions.
+    pub cooperative_matrices: Vec<wgpu::CooperativeMatrixProperties>,
     pub memory: Arc<MemoryTracker>,
     /// Buffers created, blocking reads, submissions, dispatches: see `Counters`.
     pub counters: Counters,
@@ -197,6 +202,7 @@ impl GpuContext {
             float_atomics,
             subgroups,
             shader_f16,
+            cooperative_matrices: adapter.cooperative_matrix_properties(),
             memory: Arc::default(),
             counters: Counters::default(),
             profiler: KernelProfiler::default(),
@@ -224,6 +230,11 @@ impl GpuContext {
             .min(limits.max_buffer_size)
     }
 
+    /// The cooperative matrix shapes, e.g. "16×16×16 f16→f32, 16×8×16 f16→f16", or "none".
+    pub fn cooperative_matrix_shapes(&self) -> String {
+        shapes(&self.cooperative_matrices)
+    }
+
     /// "name (backend, device type)", for logs and benchmark reports.
     pub fn adapter_name(&self) -> String {
         let i = &self.adapter_info;
@@ -231,8 +242,40 @@ impl GpuContext {
     }
 }
 
+fn shapes(all: &[wgpu::CooperativeMatrixProperties]) -> String {
+    if all.is_empty() {
+        return "none".to_owned();
+    }
+    let name = |t: wgpu::CooperativeScalarType| format!("{t:?}").to_ascii_lowercase();
+    all.iter()
+        .map(|c| {
+            let (m, n, k) = (c.m_size, c.n_size, c.k_size);
+            format!("{m}×{n}×{k} {}→{}", name(c.ab_type), name(c.cr_type))
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn cooperative_shapes_read_as_m_n_k_and_types() {
+        use wgpu::CooperativeScalarType::{F16, F32};
+        let shape = |m, n, k, ab, cr| wgpu::CooperativeMatrixProperties {
+            m_size: m,
+            n_size: n,
+            k_size: k,
+            ab_type: ab,
+            cr_type: cr,
+            saturating_accumulation: false,
+        };
+        assert_eq!(super::shapes(&[]), "none");
+        assert_eq!(
+            super::shapes(&[shape(16, 8, 16, F16, F32), shape(8, 8, 8, F32, F32)]),
+            "16×8×16 f16→f32, 8×8×8 f32→f32"
+        );
+    }
+
     #[test]
     fn a_switch_is_on_unless_empty_or_false() {
         for v in ["1", "true", "yes", "TRUE", "anything"] {

@@ -69,6 +69,8 @@ pub struct BenchReport {
     pub subgroups: bool,
     /// WGSL f16, in which F stores its forward maps.
     pub shader_f16: bool,
+    /// The adapter's cooperative matrix (tensor-core) shapes, "none" without; unused so far.
+    pub cooperative_matrices: String,
     pub width: u32,
     pub height: u32,
     pub views: usize,
@@ -420,6 +422,7 @@ fn measure(
         float_atomics: gpu.float_atomics,
         subgroups: gpu.subgroups,
         shader_f16: gpu.shader_f16,
+        cooperative_matrices: gpu.cooperative_matrix_shapes(),
         width,
         height,
         views: views.len(),
@@ -493,6 +496,7 @@ impl BenchReport {
             .map_or("unknown".to_owned(), |b| format!("{:.0} MiB", mib(b)));
         format!(
             "adapter          {} (float atomics: {}, subgroups: {}, f16: {})\n\
+             tensor cores     {} (cooperative matrices; not used yet)\n\
              source           {}\n\
              images           {} views at {}×{}{}\n\
              Gaussians        {} → {} (from iteration {})\n\
@@ -507,6 +511,7 @@ impl BenchReport {
             yes_no(self.float_atomics),
             yes_no(self.subgroups),
             yes_no(self.shader_f16),
+            self.cooperative_matrices,
             self.source,
             self.views,
             self.width,
