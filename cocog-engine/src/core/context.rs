@@ -26,9 +26,12 @@ pub struct GpuContext {
     pub shader_f16: bool,
     /// The matrix multiply-add shapes the adapter runs cooperatively (tensor cores), as
     /// `VK_KHR_cooperative_matrix` reports them; wgpu exposes them to WGSL as an experimental
-    /// feature, which the engine does not enable yet. Recorded so benchmarks say what a
-    /// device could give F's convolutions.
+    /// feature. Recorded so benchmarks say what a device could give F's convolutions.
     pub cooperative_matrices: Vec<wgpu::CooperativeMatrixProperties>,
+    /// wgpu's experimental cooperative matrices are enabled, with 16×16×16 f16→f32 products
+    /// and 32-wide subgroups (`prims::CoopGemm`). Off unless `COCOG_COOPERATIVE_MATRIX` asks:
+    /// wgpu marks the feature as possibly unsound, and no kernel of a training step uses it.
+    pub cooperative_f16: bool,
     pub memory: Arc<MemoryTracker>,
     /// Buffers created, blocking reads, submissions, dispatches: see `Counters`.
     pub counters: Counters,
@@ -50,9 +53,9 @@ impl std::fmt::Debug for GpuContext {
     }
 }
 
-/// Whether a `COCOG_NO_*` switch asks for a fallback: set to anything but empty, `0`,
-/// `false`, `no` or `off`, so `COCOG_NO_F16=0` reads as people mean it.
-fn switched_off(var: &str) -> bool {
+/// Whether a `COCOG_*` switch is on (a `COCOG_NO_*` one asks for a fallback): set to anything
+/// but empty, `0`, `false`, `no` or `off`, so `COCOG_NO_F16=0` reads as people mean it.
+fn switched_on(var: &str) -> bool {
     std::env::var(var).is_ok_and(|v| switch_value_on(&v))
 }
 
@@ -163,12 +166,27 @@ impl GpuContext {
         let float_atomics = adapter
             .features()
             .contains(wgpu::Features::SHADER_FLOAT32_ATOMIC)
-            && !switched_off("COCOG_NO_FLOAT_ATOMICS");
+            && !switched_on("COCOG_NO_FLOAT_ATOMICS");
         let subgroups = adapter.features().contains(wgpu::Features::SUBGROUP)
-            && !switched_off("COCOG_NO_SUBGROUPS");
-        let shader_f16 = adapter.features().contains(wgpu::Features::SHADER_F16)
-            && !switched_off("COCOG_NO_F16");
+            && !switched_on("COCOG_NO_SUBGROUPS");
+        let shader_f16 =
+            adapter.features().contains(wgpu::Features::SHADER_F16) && !switched_on("COCOG_NO_F16");
+        let cooperative_matrices = adapter.cooperative_matrix_properties();
+        let cooperative_f16 = switched_on("COCOG_COOPERATIVE_MATRIX")
+            && shader_f16
+            && info.subgroup_min_size == 32
+            && info.subgroup_max_size == 32
+            && adapter
+                .features()
+                .contains(wgpu::Features::EXPERIMENTAL_COOPERATIVE_MATRIX)
+            && cooperative_matrices.iter().any(|c| {
+                use wgpu::CooperativeScalarType::{F16, F32};
+                (c.m_size, c.n_size, c.k_size, c.ab_type, c.cr_type) == (16, 16, 16, F16, F32)
+            });
         let mut required_features = wgpu::Features::empty();
+        if cooperative_f16 {
+            required_features |= wgpu::Features::EXPERIMENTAL_COOPERATIVE_MATRIX;
+        }
         if shader_f16 {
             required_features |= wgpu::Features::SHADER_F16;
         }
@@ -194,6 +212,14 @@ impl GpuContext {
                 label: Some("cocog-engine"),
                 required_features,
                 required_limits,
+                // SAFETY: asked for only under COCOG_COOPERATIVE_MATRIX; then wgpu may let
+                // a wrong cooperative-matrix shader misbehave, which the kernel's f64 test
+                // is there to catch on the device.
+                experimental_features: if cooperative_f16 {
+                    unsafe { wgpu::ExperimentalFeatures::enabled() }
+                } else {
+                    wgpu::ExperimentalFeatures::disabled()
+                },
                 ..Default::default()
             }))?;
         Ok(Self {
@@ -202,7 +228,8 @@ impl GpuContext {
             float_atomics,
             subgroups,
             shader_f16,
-            cooperative_matrices: adapter.cooperative_matrix_properties(),
+            cooperative_matrices,
+            cooperative_f16,
             memory: Arc::default(),
             counters: Counters::default(),
             profiler: KernelProfiler::default(),

@@ -1,0 +1,76 @@
+//! The experimental cooperative-matrix product (`CoopGemm`). Everywhere: its WGSL compiles to
+//! SPIR-V through naga (what wgpu runs on Vulkan), which caught a naga 30 bug that drops
+//! expressions written inside a `coopStore` call. Where an adapter has 16×16×16 f16→f32
+//! cooperative matrices (NVIDIA's tensor cores; no software adapter has them): with
+//! `COCOG_COOPERATIVE_MATRIX=1`, the product against an f64 one of the same f16 inputs.
+
+mod common;
+
+use cocog_engine::CoopGemm;
+use common::{Rng, gpu};
+
+#[test]
+fn coop_gemm_compiles_to_spirv() {
+    let source = CoopGemm::wgsl();
+    let module = naga::front::wgsl::parse_str(&source)
+        .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&source)));
+    let info = naga::valid::Validator::new(
+        naga::valid::ValidationFlags::all(),
+        naga::valid::Capabilities::all(),
+    )
+    .validate(&module)
+    .expect("valid module");
+    let options = naga::back::spv::Options {
+        lang_version: (1, 5),
+        ..Default::default()
+    };
+    let words = naga::back::spv::write_vec(&module, &info, &options, None).expect("SPIR-V");
+    assert_eq!(words[0], 0x0723_0203, "SPIR-V magic");
+}
+
+#[test]
+fn coop_gemm_matches_f64_where_the_adapter_has_tensor_cores() {
+    let Some(ctx) = gpu() else { return };
+    let Some(gemm) = CoopGemm::new(ctx) else {
+        eprintln!(
+            "skipped: {} has no 16×16×16 f16→f32 cooperative matrices enabled (offers: {}; \
+             COCOG_COOPERATIVE_MATRIX=1 enables them where offered)",
+            ctx.adapter_name(),
+            ctx.cooperative_matrix_shapes()
+        );
+        return;
+    };
+    let (m, n, k) = (128usize, 192usize, 96usize);
+    let mut rng = Rng::new(7);
+    let mut half = |len: usize| -> Vec<half::f16> {
+        (0..len)
+            .map(|_| half::f16::from_f32(rng.range_f32(-1.0, 1.0)))
+            .collect()
+    };
+    let (a, b) = (half(m * k), half(k * n));
+    let bits = |v: &[half::f16]| v.iter().map(|h| h.to_bits()).collect::<Vec<u16>>();
+    let ga = ctx.storage_from("a", &bits(&a));
+    let gb = ctx.storage_from("b", &bits(&b));
+    let gc = ctx.storage("c", (m * n * 4) as u64);
+    let mut rec = ctx.recorder();
+    gemm.encode(&mut rec, (m as u32, n as u32, k as u32), &ga, &gb, &gc);
+    rec.submit();
+    let got: Vec<f32> = ctx.read(&gc, m * n).expect("read C");
+    for i in 0..m {
+        for j in 0..n {
+            let (mut want, mut mag) = (0.0f64, 0.0f64);
+            for kk in 0..k {
+                let p = f64::from(a[i * k + kk].to_f32()) * f64::from(b[kk * n + j].to_f32());
+                want += p;
+                mag += p.abs();
+            }
+            let g = f64::from(got[i * n + j]);
+            // f16 × f16 is exact in f32; the error is the f32 accumulation's.
+            let tol = 1e-5 * mag + 1e-6;
+            assert!(
+                (g - want).abs() <= tol,
+                "C[{i}][{j}] = {g}, want {want} (±{tol})"
+            );
+        }
+    }
+}
