@@ -18,7 +18,10 @@
 #                   (the default variant, F on) on them, the latter with F's convolutions as
 #                   implicit GEMMs and as tiled kernels (COCOG_F_CONV=tiled), and with F's maps
 #                   in f32 (COCOG_NO_F16=1) as well as f16, with the per-kernel split
-#                   (--kernels)                                                          ~95 s
+#                   (--kernels); then, where DEV has gemm-bench (`cargo bench --bench gemm
+#                   --no-run`, stripped), F's 3×3 layer as a plain GEMM at 100×75 and 400×300
+#                   on the f32 tiled product and on tensor cores (COCOG_COOPERATIVE_MATRIX=1)
+#                                                                                     ~105 s
 #   peer-synthetic  #11: `cocog bench --synthetic 1000000 --size 1920x1080` (and with --zoom 3,
 #                   most Gaussians culled, per kernel), then gsplat on the same Gaussians and
 #                   cameras (peer_gsplat.py workload)                             ~55 s + gsplat build
@@ -99,6 +102,14 @@ phase_step() {
             --resume "$model" --method "${m%%-*}" --iterations 100 --warmup 10 --kernels \
             >>"$log" 2>&1
     done
+    if [[ -x "$dev/gemm-bench" ]]; then
+        local px
+        for px in 45056 720000; do
+            echo "-- F's 3×3 layer as a GEMM, $px pixels (f32 tiled vs cooperative matrices)" >>"$log"
+            COCOG_COOPERATIVE_MATRIX=1 COCOG_BENCH_PIXELS=$px bounded 30 "$dev/gemm-bench" \
+                >>"$log" 2>&1
+        done
+    fi
 }
 
 phase_peer_synthetic() {
@@ -134,7 +145,12 @@ phase_tests() {
         return 1
     for t in "$work"/tests/*; do
         echo "== $(basename "$t")"
-        CI=true bounded 150 "$t" --test-threads 2 2>&1 | grep -E "^test |test result|panicked|FAILED|assert"
+        # The cooperative-matrix product's own test enables the experimental feature; no
+        # other test does, so they test what training runs.
+        local coop=0
+        [[ $(basename "$t") == gpu_coop_gemm ]] && coop=1
+        CI=true COCOG_COOPERATIVE_MATRIX=$coop bounded 150 "$t" --test-threads 2 --nocapture 2>&1 |
+            grep -E "^test |test result|panicked|FAILED|assert|skipped"
     done >"$results/tests.log" 2>&1
 }
 
@@ -152,7 +168,7 @@ while ((i < ${#phases[@]})); do
     p="${phases[i]}"
     i=$((i + 1))
     case "$p" in
-        step) run_phase step 130 ;;
+        step) run_phase step 140 ;;
         peer-synthetic) run_phase peer-synthetic 165 ;;
         peer-train) run_phase peer-train 450 ;;
         idle-bench) run_phase idle-bench 120 ;;
