@@ -26,11 +26,11 @@ var<workgroup> slice_b: array<f16, 2048>;
 fn coop_gemm(
     @builtin(workgroup_id) wg: vec3<u32>,
     @builtin(local_invocation_index) lid: u32,
-    @builtin(subgroup_size) width: u32,
 ) {
     let m0 = wg.y * 64u;
     let n0 = wg.x * 64u;
-    let sub = lid / width;
+    // Subgroups are 32 wide (the context checks), so thread lid is in subgroup lid / 32.
+    let sub = lid / 32u;
     let sm = (sub / 2u) * 32u;
     let sn = (sub % 2u) * 32u;
     var c00 = coop_mat16x16<f32, C>();
