@@ -9,10 +9,11 @@
 #
 # BUDGET (seconds, default 560) bounds the whole call: a phase that would not fit what is left is
 # skipped and says so in RESULTS/session.txt, and every command's timeout is cut to what is
-# left. From DEV (default .device, made on the development machine: the stripped `cocog`,
-# bench/ with sharp-dev and defocus-dev/dev-table (gates also want dev-shelf; everything carried
-# must stay under 64 MiB), lpips/, the gsplat-1.5.3 wheel, tests.tar.xz of stripped GPU test
-# executables from `cargo test --no-run`):
+# left. From DEV (default .device, made on the development machine: the stripped `cocog` and
+# `gemm-bench`, each possibly xz-compressed as NAME.xz; bench/ with sharp-dev and
+# defocus-dev/dev-table (gates also want dev-shelf; everything carried must stay under 64 MiB);
+# lpips/, the gsplat-1.5.3 wheel, tests.tar.xz of stripped GPU test executables from `cargo
+# test --no-run`):
 #   step            #12's step ratio: a 5000-iteration 3dgs run on dev-table at 100×75 gives the
 #                   Gaussians, then `cocog bench --resume` times a 3dgs step and a cocog step
 #                   (the default variant, F on) on them, the latter with F's convolutions as
@@ -47,7 +48,16 @@ phases=("$@")
 budget="${BUDGET:-560}"
 dev="${DEV:-$root/.device}"
 work="${WORK:-/tmp/gpu-session}"
-cocog="$dev/cocog"
+mkdir -p "$work"
+# Executables may travel xz-compressed (DEV/NAME.xz), as everything carried shares 64 MiB.
+for exe in cocog gemm-bench; do
+    if [[ -f "$dev/$exe.xz" && ! -x "$work/$exe" ]]; then
+        xz -dc "$dev/$exe.xz" >"$work/$exe" && chmod +x "$work/$exe"
+    elif [[ -x "$dev/$exe" ]]; then
+        ln -sf "$dev/$exe" "$work/$exe"
+    fi
+done
+cocog="$work/cocog"
 export COCOG="$cocog" COCOG_LPIPS_WEIGHTS="$dev/lpips"
 mkdir -p "$results" "$work"
 log="$results/session.txt"
@@ -102,11 +112,11 @@ phase_step() {
             --resume "$model" --method "${m%%-*}" --iterations 100 --warmup 10 --kernels \
             >>"$log" 2>&1
     done
-    if [[ -x "$dev/gemm-bench" ]]; then
+    if [[ -x "$work/gemm-bench" ]]; then
         local px
         for px in 45056 720000; do
             echo "-- F's 3×3 layer as a GEMM, $px pixels (f32 tiled vs cooperative matrices)" >>"$log"
-            COCOG_COOPERATIVE_MATRIX=1 COCOG_BENCH_PIXELS=$px bounded 30 "$dev/gemm-bench" \
+            COCOG_COOPERATIVE_MATRIX=1 COCOG_BENCH_PIXELS=$px bounded 30 "$work/gemm-bench" \
                 >>"$log" 2>&1
         done
     fi
