@@ -50,9 +50,11 @@ dev="${DEV:-$root/.device}"
 work="${WORK:-/tmp/gpu-session}"
 mkdir -p "$work"
 # Executables may travel xz-compressed (DEV/NAME.xz), as everything carried shares 64 MiB.
+# Unpacked on every call: a warm machine keeps WORK, and a later call may carry a rebuilt one.
 for exe in cocog gemm-bench; do
-    if [[ -f "$dev/$exe.xz" && ! -x "$work/$exe" ]]; then
-        xz -dc "$dev/$exe.xz" >"$work/$exe" && chmod +x "$work/$exe"
+    if [[ -f "$dev/$exe.xz" ]]; then
+        xz -dc "$dev/$exe.xz" >"$work/$exe.new" && chmod +x "$work/$exe.new" &&
+            mv -f "$work/$exe.new" "$work/$exe"
     elif [[ -x "$dev/$exe" ]]; then
         ln -sf "$dev/$exe" "$work/$exe"
     fi

@@ -212,13 +212,22 @@ fn metres_of(units: Option<UnitScale>) -> f64 {
         .map_or(1.0, |u| u.metres_per_unit)
 }
 
-/// A photo's key on both sides: its file name without folders or extension. Scenes keep a
-/// dataset's subfolders in view names, transforms.json paths carry theirs, and the same photo
-/// is often a `.JPG` in one and a `.png` (or no extension) in the other.
+/// A photo's key on both sides: its file name without folders or an image extension. Scenes
+/// keep a dataset's subfolders in view names, transforms.json paths carry theirs, and the same
+/// photo is often a `.JPG` in one and a `.png` (or no extension) in the other. Only image
+/// extensions are dropped, so `frame.0001` stays itself.
 fn photo_key(name: &str) -> String {
-    Path::new(name)
-        .file_stem()
-        .map_or_else(|| name.to_owned(), |n| n.to_string_lossy().into_owned())
+    const IMAGE: [&str; 8] = ["png", "jpg", "jpeg", "exr", "webp", "tif", "tiff", "bmp"];
+    let path = Path::new(name);
+    let image = path
+        .extension()
+        .is_some_and(|e| IMAGE.contains(&e.to_string_lossy().to_ascii_lowercase().as_str()));
+    let key = if image {
+        path.file_stem()
+    } else {
+        path.file_name()
+    };
+    key.map_or_else(|| name.to_owned(), |n| n.to_string_lossy().into_owned())
 }
 
 /// The keys that name exactly one of `names` (a key shared by two photos names neither).

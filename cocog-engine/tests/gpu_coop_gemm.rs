@@ -32,6 +32,16 @@ fn coop_gemm_compiles_to_spirv() {
 fn coop_gemm_matches_f64_where_the_adapter_has_tensor_cores() {
     let Some(ctx) = gpu() else { return };
     let Some(gemm) = CoopGemm::new(ctx) else {
+        // Asked for, on an adapter that offers the shape: only a subgroup width other than 32
+        // may refuse it, and that must not read as a pass on a GPU with tensor cores.
+        let asked = std::env::var("COCOG_COOPERATIVE_MATRIX").is_ok_and(|v| v == "1");
+        let offered = ctx.cooperative_matrix_shapes().contains("16×16×16 f16→f32");
+        assert!(
+            !(asked && offered && ctx.adapter_info.subgroup_min_size == 32),
+            "COCOG_COOPERATIVE_MATRIX=1 and {} offers 16×16×16 f16→f32, but the context did \
+             not enable it",
+            ctx.adapter_name()
+        );
         eprintln!(
             "skipped: {} has no 16×16×16 f16→f32 cooperative matrices enabled (offers: {}; \
              COCOG_COOPERATIVE_MATRIX=1 enables them where offered)",

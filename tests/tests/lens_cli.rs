@@ -146,31 +146,70 @@ fn cameras_that_disagree_are_reported_and_units_kept() {
     assert!(text.contains("not one similarity apart"), "{text}");
 }
 
-#[test]
-fn photos_match_by_name_whatever_their_folder_and_extension() {
-    let work = tempfile::tempdir().expect("tempdir");
-    let s = scene(work.path());
-    // Blender's style: no extension, the split as the folder; the scene has `NNN.png`.
-    let t = truth_named(work.path(), &s, 2.0, 0.0, |i| format!("./train/{i:03}"));
-    let r = lens_json(work.path(), &t);
-    assert_eq!(
-        r["camera_pairs"].as_u64(),
-        Some((VIEWS * (VIEWS - 1) / 2) as u64),
-        "{r}"
-    );
-    assert!(r["median_focus_relative_error"].as_f64().is_some(), "{r}");
-    // Frame 2 is a `.jpg` of photo 001: the two frames name 001 twice, so neither names it.
-    let t = truth_named(work.path(), &s, 2.0, 0.0, |i| match i {
-        2 => "images/001.jpg".into(),
-        _ => format!("images/{i:03}.png"),
-    });
-    let r = lens_json(work.path(), &t);
-    let truths: Vec<bool> = r["views"]
+/// The truth's lenses found for the training views (001…007), in order.
+fn matched(r: &Value) -> Vec<bool> {
+    r["views"]
         .as_array()
         .expect("views")
         .iter()
         .map(|v| !v["true_focus_distance"].is_null())
-        .collect();
-    // Views 001…007 (000 is held out): 001 ambiguous, 002 absent, the rest matched.
-    assert_eq!(truths, [false, false, true, true, true, true, true], "{r}");
+        .collect()
+}
+
+#[test]
+fn photos_match_by_name_whatever_their_folder_and_extension() {
+    let work = tempfile::tempdir().expect("tempdir");
+    let s = scene(work.path());
+    let all = (VIEWS * (VIEWS - 1) / 2) as u64;
+    // Another folder and extension (the scene has `NNN.png`), and Blender's bare `./train/NNN`.
+    for path in [
+        (|i| format!("images_4/{i:03}.JPG")) as fn(usize) -> String,
+        |i| format!("./train/{i:03}"),
+    ] {
+        let r = lens_json(work.path(), &truth_named(work.path(), &s, 2.0, 0.0, path));
+        assert_eq!(r["camera_pairs"].as_u64(), Some(all), "{r}");
+        assert_eq!(matched(&r), [true; 7], "{r}");
+    }
+    // Only image extensions are dropped: photo `frame.001.png` is the truth's `x/frame.001`,
+    // not one of seven `frame`s.
+    let path = work.path().join("scene.json");
+    let mut dotted = s.clone();
+    for (i, v) in dotted["views"]
+        .as_array_mut()
+        .expect("views")
+        .iter_mut()
+        .enumerate()
+    {
+        v["name"] = json!(format!("frame.{i:03}.png"));
+    }
+    std::fs::write(&path, dotted.to_string()).expect("write");
+    let t = truth_named(work.path(), &s, 2.0, 0.0, |i| format!("x/frame.{i:03}"));
+    let r = lens_json(work.path(), &t);
+    assert_eq!(matched(&r), [true; 7], "{r}");
+    std::fs::write(&path, s.to_string()).expect("write");
+    // Frame 2 is a `.jpg` of photo 001: two frames name 001, so neither names it, for the
+    // lenses and for the camera pairs that measure the unit alike.
+    let twice = truth_named(work.path(), &s, 2.0, 0.0, |i| match i {
+        2 => "images/001.jpg".into(),
+        _ => format!("images/{i:03}.png"),
+    });
+    let r = lens_json(work.path(), &twice);
+    assert_eq!(
+        matched(&r),
+        [false, false, true, true, true, true, true],
+        "{r}"
+    );
+    assert_eq!(r["camera_pairs"].as_u64(), Some(15), "{r}");
+    // The same on the scene's side: views 001 and 003 both named `NNN/001.png`.
+    let mut renamed = s.clone();
+    renamed["views"][1]["name"] = json!("a/001.png");
+    renamed["views"][3]["name"] = json!("b/001.png");
+    std::fs::write(&path, renamed.to_string()).expect("write");
+    let r = lens_json(work.path(), &truth(work.path(), &s, 2.0, 0.0));
+    assert_eq!(
+        matched(&r),
+        [false, true, false, true, true, true, true],
+        "{r}"
+    );
+    assert_eq!(r["camera_pairs"].as_u64(), Some(15), "{r}");
 }

@@ -29,7 +29,8 @@ fn coop_gemm(
 ) {
     let m0 = wg.y * 64u;
     let n0 = wg.x * 64u;
-    // Subgroups are 32 wide (the context checks), so thread lid is in subgroup lid / 32.
+    // Subgroups are 32 wide (the context checks) and taken to hold consecutive invocations,
+    // as on NVIDIA; Vulkan does not promise that layout, so the f64 test is the check.
     let sub = lid / 32u;
     let sm = (sub / 2u) * 32u;
     let sn = (sub % 2u) * 32u;
@@ -42,6 +43,9 @@ fn coop_gemm(
             slice_a[e] = a[(m0 + e / BK) * dims.k + k0 + e % BK];
             slice_b[e] = b[(k0 + e / 64u) * dims.n + n0 + e % 64u];
         }
+        // A shader with cooperative matrices is emitted under the Vulkan memory model, where
+        // naga 30's plain workgroup loads and stores are not formally ordered by this barrier
+        // across invocations; drivers order them in practice, and the f64 test checks.
         workgroupBarrier();
         for (var kk = 0u; kk < BK; kk += 16u) {
             let a0 = coopLoadT<coop_mat16x16<f16, A>>(&slice_a[sm * BK + kk], BK);
