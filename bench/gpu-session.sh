@@ -19,10 +19,11 @@
 #                   (the default variant, F on) on them, the latter with F's convolutions as
 #                   implicit GEMMs and as tiled kernels (COCOG_F_CONV=tiled), and with F's maps
 #                   in f32 (COCOG_NO_F16=1) as well as f16, with the per-kernel split
-#                   (--kernels); then, where DEV has gemm-bench (`cargo bench --bench gemm
+#                   (--kernels), and on tensor cores (COCOG_F_CONV=coop, f16 operands,
+#                   experimental); then, where DEV has gemm-bench (`cargo bench --bench gemm
 #                   --no-run`, stripped), F's 3×3 layer as a plain GEMM at 100×75 and 400×300
 #                   on the f32 tiled product and on tensor cores (COCOG_COOPERATIVE_MATRIX=1)
-#                                                                                     ~105 s
+#                                                                                     ~125 s
 #   peer-synthetic  #11: `cocog bench --synthetic 1000000 --size 1920x1080` (and with --zoom 3,
 #                   most Gaussians culled, per kernel), then gsplat on the same Gaussians and
 #                   cameras (peer_gsplat.py workload)                             ~55 s + gsplat build
@@ -105,10 +106,11 @@ phase_step() {
     bounded 120 "$cocog" train "$work/in-dev-table" -o "$model" --downscale 4 --method 3dgs \
         --iterations 5000 --checkpoint-every 0 -q --force >>"$log" 2>&1
     local m vars
-    for m in 3dgs cocog cocog-tiled cocog-f32; do
+    for m in 3dgs cocog cocog-tiled cocog-f32 cocog-coop; do
         echo "-- $m step on the model's Gaussians" >>"$log"
         vars=(COCOG_F_CONV=gemm)
         [[ $m == *-tiled ]] && vars=(COCOG_F_CONV=tiled)
+        [[ $m == *-coop ]] && vars=(COCOG_F_CONV=coop COCOG_COOPERATIVE_MATRIX=1)
         [[ $m == *-f32 ]] && vars+=(COCOG_NO_F16=1)
         bounded 60 env "${vars[@]}" "$cocog" bench "$work/in-dev-table" --downscale 4 \
             --resume "$model" --method "${m%%-*}" --iterations 100 --warmup 10 --kernels \
@@ -180,7 +182,7 @@ while ((i < ${#phases[@]})); do
     p="${phases[i]}"
     i=$((i + 1))
     case "$p" in
-        step) run_phase step 140 ;;
+        step) run_phase step 160 ;;
         peer-synthetic) run_phase peer-synthetic 165 ;;
         peer-train) run_phase peer-train 450 ;;
         idle-bench) run_phase idle-bench 120 ;;

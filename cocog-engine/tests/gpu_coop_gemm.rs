@@ -84,3 +84,65 @@ fn coop_gemm_matches_f64_where_the_adapter_has_tensor_cores() {
         }
     }
 }
+
+/// F with its convolutions on tensor cores (`ConvPath::Coop`) against F on the f32 implicit
+/// GEMMs (which nn_compositor checks against f64), per scalar: f16 operands cost about three
+/// decimal digits, so each output must agree within 1% of that output's largest value, which a
+/// wrong index, layout or scale misses by far. The loss gradient is 1e-4 per value, near a real
+/// one, so the gradient products' 2^16 scaling is exercised in range.
+#[test]
+fn compositor_on_tensor_cores_matches_the_f32_products() {
+    use cocog_engine::Workspace;
+    use cocog_engine::nn::{CompositeMode, Compositor, CompositorConfig, ConvPath, MapPrecision};
+    let Some(ctx) = gpu() else { return };
+    if !ctx.cooperative_f16 {
+        eprintln!(
+            "skipped: {} has no cooperative matrices enabled (COCOG_COOPERATIVE_MATRIX=1 where \
+             16×16×16 f16→f32 is offered; offers: {})",
+            ctx.adapter_name(),
+            ctx.cooperative_matrix_shapes()
+        );
+        return;
+    }
+    let (channels, images, h, w) = (64u32, 3u32, 12u32, 11u32);
+    let config = CompositorConfig::with_channels(channels);
+    let layout = config.layout();
+    let mut rng = Rng::new(11);
+    let params: Vec<f32> = (0..layout.len).map(|_| rng.range_f32(-0.3, 0.3)).collect();
+    let pixels = (images * h * w) as usize;
+    let renders: Vec<f32> = (0..pixels * 4).map(|_| rng.range_f32(0.0, 1.0)).collect();
+    let v_blend: Vec<f32> = (0..(h * w) as usize * 4)
+        .map(|_| rng.range_f32(-1e-4, 1e-4))
+        .collect();
+    let run = |path| {
+        let comp = Compositor::with_options(ctx, config, path, MapPrecision::F32);
+        let p = ctx.storage_from("params", &params);
+        let r = ctx.storage_from("renders", &renders);
+        let v = ctx.storage_from("v blend", &v_blend);
+        let mut ws = Workspace::default();
+        let mut rec = ctx.recorder();
+        let mode = CompositeMode::Learned;
+        let out = comp.encode_forward(&mut rec, &mut ws, &p, &r, w, h, images, mode);
+        let g = comp.encode_backward(&mut rec, &mut ws, &p, &r, &out, &v);
+        rec.submit();
+        [
+            ctx.read::<f32>(&out.blend, (h * w) as usize * 4).unwrap(),
+            ctx.read::<f32>(&g.v_renders, pixels * 4).unwrap(),
+            ctx.read::<f32>(&g.v_params, layout.len).unwrap(),
+        ]
+    };
+    let (exact, coop) = (run(ConvPath::Gemm), run(ConvPath::Coop));
+    for (what, (e, c)) in ["composite", "render gradient", "parameter gradient"]
+        .iter()
+        .zip(exact.iter().zip(&coop))
+    {
+        let largest = e.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        assert!(largest > 0.0, "{what}: all zero");
+        for (j, (a, b)) in e.iter().zip(c).enumerate() {
+            assert!(
+                (a - b).abs() <= 1e-2 * largest,
+                "{what} {j}: tensor cores {b:e} vs f32 {a:e} (largest {largest:e})"
+            );
+        }
+    }
+}

@@ -141,7 +141,7 @@ pub fn shader(ctx: &GpuContext, label: &str, source: &str) -> wgpu::ShaderModule
         })
 }
 
-fn hoist_enables(source: &str) -> String {
+pub(crate) fn hoist_enables(source: &str) -> String {
     let is_enable = |l: &&str| l.trim_start().starts_with("enable ");
     let mut out = String::new();
     for line in source.lines().filter(is_enable) {

@@ -16,6 +16,8 @@ pub use buffers::{GpuBuffer, MemoryTracker};
 pub use context::{GpuContext, test_gpu};
 pub use counters::{CounterSnapshot, Counters};
 pub use headless::{device_select_probe_is_futile, quiet_headless_vulkan};
+#[cfg(test)]
+pub(crate) use kernel::hoist_enables;
 pub use kernel::{Kernel, shader};
 pub use profiler::{KernelProfiler, KernelTime};
 pub use readback::Readback;

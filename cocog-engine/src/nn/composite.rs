@@ -61,14 +61,19 @@ pub enum ConvPath {
     /// Spatially tiled direct convolutions: a block's input patch staged once per slice of
     /// channels (conv_tile.rs). As fast as the GEMMs on lavapipe; unmeasured on a GPU.
     Tiled,
+    /// The implicit GEMMs on cooperative matrices (tensor cores) with f16 operands, where the
+    /// context enabled them (`COCOG_COOPERATIVE_MATRIX=1`), else `Gemm`. Experimental: never
+    /// run on a GPU yet.
+    Coop,
 }
 
 impl ConvPath {
-    /// `COCOG_F_CONV=tiled` picks `Tiled`, anything else `Gemm`: a switch for timing the two
-    /// against each other on a GPU (`cocog bench --method cocog --kernels`).
+    /// `COCOG_F_CONV=tiled` picks `Tiled`, `coop` picks `Coop`, anything else `Gemm`: a switch
+    /// for timing them against each other on a GPU (`cocog bench --method cocog --kernels`).
     pub fn from_env() -> Self {
         match std::env::var("COCOG_F_CONV").as_deref() {
             Ok("tiled") => ConvPath::Tiled,
+            Ok("coop") => ConvPath::Coop,
             _ => ConvPath::Gemm,
         }
     }
@@ -167,7 +172,7 @@ impl Compositor {
         Self {
             config,
             precision,
-            gemm: ConvGemm::new(ctx, config.channels, precision),
+            gemm: ConvGemm::new(ctx, config.channels, precision, path == ConvPath::Coop),
             tile: (path == ConvPath::Tiled).then(|| ConvTile::new(ctx, precision)),
             conv: Kernel::new(ctx, &conv, "conv_forward"),
             conv_weight_parts: Kernel::new(ctx, &conv, "conv_weight_grad_part"),

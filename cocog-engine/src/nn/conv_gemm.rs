@@ -14,7 +14,7 @@
 
 use super::precision::MapPrecision;
 use crate::core::{Bind, GpuContext, Recorder, Workspace};
-use crate::prims::{Gemm, GemmLayout, GemmShape, GemmTile};
+use crate::prims::{Gemm, GemmLayout, GemmShape, GemmTile, OperandScales};
 
 pub const NO_BIAS: u32 = u32::MAX;
 
@@ -176,42 +176,86 @@ fn shape(
     }
 }
 
+/// One product of a layer: its label, WGSL problem, layout, and operand scales on tensor cores.
+struct Problem {
+    label: String,
+    source: String,
+    layout: GemmLayout,
+    scales: OperandScales,
+}
+
+/// A layer's forward, input gradient and weight gradient as problems. `cin` is the input channel
+/// count of the layer with this kernel size (its weight gradient's width), `input` the element
+/// type of its input.
+fn problems(
+    channels: u32,
+    ks: u32,
+    cin: u32,
+    precision: MapPrecision,
+    input: &str,
+) -> [Problem; 3] {
+    // Per pixel the forward and input gradient are `channels` wide; the weight gradient is
+    // channels × (taps + bias).
+    let maps = GemmTile::for_shape(channels, 1 << 16);
+    let weights = GemmTile::for_shape(channels, cin * ks * ks + 1);
+    let problem = |label: &str, body: &str, (a_k_fast, b_k_fast, split_k), scales| Problem {
+        label: format!("{label} {ks}×{ks}"),
+        source: format!(
+            "{}alias in_t = {input};\nconst KS: u32 = {ks}u;\n{COMMON}{body}",
+            precision.prelude()
+        ),
+        layout: GemmLayout {
+            a_k_fast,
+            b_k_fast,
+            split_k,
+            tile: if split_k { weights } else { maps },
+        },
+        scales,
+    };
+    // On tensor cores the loss gradient (v_out) is scaled into f16's normal range: spread over
+    // every pixel it lies near 1e-7..1e-5, and 2^16 puts it near 1e-2..1 (it must stay below 1).
+    const GRADIENT: f32 = 65536.0;
+    [
+        problem(
+            "conv forward",
+            FORWARD,
+            (true, false, false),
+            OperandScales::NONE,
+        ),
+        problem(
+            "conv input grad",
+            INPUT_GRAD,
+            (true, false, false),
+            OperandScales {
+                a: 1.0,
+                b: GRADIENT,
+            },
+        ),
+        problem(
+            "conv weight grad",
+            WEIGHT_GRAD,
+            (true, true, true),
+            OperandScales {
+                a: GRADIENT,
+                b: 1.0,
+            },
+        ),
+    ]
+}
+
 impl ConvKernels {
-    /// `cin` is the input channel count of the layer with this kernel size (its weight
-    /// gradient's width), `input` the element type of its input.
-    fn new(
-        ctx: &GpuContext,
-        channels: u32,
-        ks: u32,
-        cin: u32,
-        precision: MapPrecision,
-        input: &str,
-    ) -> Self {
-        // Per pixel the forward and input gradient are `channels` wide; the weight gradient is
-        // channels × (taps + bias).
-        let maps = GemmTile::for_shape(channels, 1 << 16);
-        let weights = GemmTile::for_shape(channels, cin * ks * ks + 1);
-        let gemm = |label: &str, body: &str, a_k_fast: bool, b_k_fast: bool, split_k: bool| {
-            let tile = if split_k { weights } else { maps };
-            Gemm::new(
-                ctx,
-                &format!("{label} {ks}×{ks}"),
-                &format!(
-                    "{}alias in_t = {input};\nconst KS: u32 = {ks}u;\n{COMMON}{body}",
-                    precision.prelude()
-                ),
-                GemmLayout {
-                    a_k_fast,
-                    b_k_fast,
-                    split_k,
-                    tile,
-                },
-            )
-        };
+    /// With `cooperative`, on tensor cores where the context enabled them.
+    fn new(ctx: &GpuContext, problems: [Problem; 3], cooperative: bool) -> Self {
+        let [forward, input_grad, weight_grad] = problems.map(|p| {
+            cooperative
+                .then(|| Gemm::cooperative(ctx, &p.label, &p.source, p.layout, p.scales))
+                .flatten()
+                .unwrap_or_else(|| Gemm::new(ctx, &p.label, &p.source, p.layout))
+        });
         Self {
-            forward: gemm("conv forward", FORWARD, true, false, false),
-            input_grad: gemm("conv input grad", INPUT_GRAD, true, false, false),
-            weight_grad: gemm("conv weight grad", WEIGHT_GRAD, true, true, true),
+            forward,
+            input_grad,
+            weight_grad,
         }
     }
 }
@@ -219,10 +263,24 @@ impl ConvKernels {
 impl ConvGemm {
     /// Kernels tiled for layers of `channels` outputs (and inputs, for the input gradient):
     /// the 5×5 layer reads the renders, the 3×3 ones F's stored maps.
-    pub fn new(ctx: &GpuContext, channels: u32, precision: MapPrecision) -> Self {
+    /// With `cooperative`, the products run on tensor cores where the context enabled them
+    /// (`Gemm::cooperative`; experimental, f16 operands).
+    pub fn new(
+        ctx: &GpuContext,
+        channels: u32,
+        precision: MapPrecision,
+        cooperative: bool,
+    ) -> Self {
+        let kernels = |ks, cin, input| {
+            ConvKernels::new(
+                ctx,
+                problems(channels, ks, cin, precision, input),
+                cooperative,
+            )
+        };
         Self {
-            k3: ConvKernels::new(ctx, channels, 3, channels, precision, "map_t"),
-            k5: ConvKernels::new(ctx, channels, 5, 3, precision, "f32"),
+            k3: kernels(3, channels, "map_t"),
+            k5: kernels(5, 3, "f32"),
         }
     }
 
@@ -309,5 +367,41 @@ impl ConvGemm {
             s,
             &[(2, input), (3, v_out), (4, v_params)],
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every convolution product compiles for tensor cores (naga to SPIR-V, as wgpu does on
+    /// Vulkan) at both map precisions: no local adapter has cooperative matrices to run them.
+    #[test]
+    fn every_product_compiles_on_cooperative_matrices() {
+        for precision in [MapPrecision::F32, MapPrecision::F16] {
+            for (ks, cin, input) in [(3, 64, "map_t"), (5, 3, "f32")] {
+                for p in problems(64, ks, cin, precision, input) {
+                    // As `shader` hands it to wgpu: enables first.
+                    let source = crate::core::hoist_enables(&Gemm::cooperative_source(
+                        &p.source, p.layout, p.scales,
+                    ));
+                    let module = naga::front::wgsl::parse_str(&source).unwrap_or_else(|e| {
+                        panic!("{} ({precision:?}): {}", p.label, e.emit_to_string(&source))
+                    });
+                    let info = naga::valid::Validator::new(
+                        naga::valid::ValidationFlags::all(),
+                        naga::valid::Capabilities::all(),
+                    )
+                    .validate(&module)
+                    .unwrap_or_else(|e| panic!("{} ({precision:?}): {e:?}", p.label));
+                    let options = naga::back::spv::Options {
+                        lang_version: (1, 5),
+                        ..Default::default()
+                    };
+                    naga::back::spv::write_vec(&module, &info, &options, None)
+                        .unwrap_or_else(|e| panic!("{} ({precision:?}): {e}", p.label));
+                }
+            }
+        }
     }
 }

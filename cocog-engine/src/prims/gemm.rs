@@ -124,6 +124,20 @@ pub struct Gemm {
     layout: GemmLayout,
     tile: Kernel,
     reduce: Option<Kernel>,
+    /// The tile kernel is gemm_coop.wgsl's (64 × 64 blocks, 32-deep slices).
+    cooperative: bool,
+}
+
+/// Powers of two that scale A and B before gemm_coop.wgsl rounds them to f16 (undone on C), so
+/// small operands such as loss gradients stay in f16's normal range.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OperandScales {
+    pub a: f32,
+    pub b: f32,
+}
+
+impl OperandScales {
+    pub const NONE: Self = Self { a: 1.0, b: 1.0 };
 }
 
 /// Split-K partial products, declared for the problem (no-ops without a split).
@@ -160,6 +174,60 @@ impl Gemm {
             reduce: layout.split_k.then(|| {
                 Kernel::labelled(ctx, &module, "gemm_reduce", &format!("{label} (reduce)"))
             }),
+            cooperative: false,
+        }
+    }
+
+    /// `new`'s product on cooperative matrices (gemm_coop.wgsl: f16 operands scaled by
+    /// `scales`, f32 sums), where the context enabled them (`GpuContext::cooperative_f16`);
+    /// `None` elsewhere. `layout.tile` is ignored: blocks are 64 × 64.
+    pub fn cooperative(
+        ctx: &GpuContext,
+        label: &str,
+        problem: &str,
+        layout: GemmLayout,
+        scales: OperandScales,
+    ) -> Option<Self> {
+        if !ctx.cooperative_f16 {
+            return None;
+        }
+        let source = Self::cooperative_source(problem, layout, scales);
+        let module = shader(ctx, label, &source);
+        // The split-K sum is gemm.wgsl's, over the same partials.
+        let reduce = layout.split_k.then(|| {
+            let plain = Self::new(ctx, label, problem, layout);
+            plain.reduce.expect("split-K reduce")
+        });
+        Some(Self {
+            layout,
+            tile: Kernel::labelled(ctx, &module, "gemm_tile", &format!("{label} (coop)")),
+            reduce,
+            cooperative: true,
+        })
+    }
+
+    /// gemm_coop.wgsl after `problem`, enables included (tests compile it without a device).
+    pub fn cooperative_source(problem: &str, layout: GemmLayout, scales: OperandScales) -> String {
+        format!(
+            "enable f16;\nenable wgpu_cooperative_matrix;\n\
+             const A_K_FAST: bool = {};\nconst B_K_FAST: bool = {};\nconst SPLIT: bool = {};\n\
+             const SCALE_A: f32 = {:?};\nconst SCALE_B: f32 = {:?};\n{}\n{problem}\n{}",
+            layout.a_k_fast,
+            layout.b_k_fast,
+            layout.split_k,
+            scales.a,
+            scales.b,
+            include_str!("gemm_coop.wgsl"),
+            partials_source(layout.split_k),
+        )
+    }
+
+    /// Rows, columns and depth of a block of C.
+    fn block(&self) -> (u32, u32, u32) {
+        if self.cooperative {
+            (64, 64, 32)
+        } else {
+            self.layout.tile.dims()
         }
     }
 
@@ -188,7 +256,7 @@ impl Gemm {
         if shape.m == 0 || shape.n == 0 || shape.batches == 0 {
             return;
         }
-        let (bm, bn, bk) = self.layout.tile.dims();
+        let (bm, bn, bk) = self.block();
         let tiles = shape.m.div_ceil(bm) * shape.n.div_ceil(bn);
         let parts = self.parts(&shape, tiles);
         let k_split = shape.k.div_ceil(parts).next_multiple_of(bk).max(bk);

@@ -13,7 +13,7 @@ mod sort;
 pub use adam::{Adam, AdamConfig, AdamMoments};
 pub use add::AddInto;
 pub use coop_gemm::CoopGemm;
-pub use gemm::{Gemm, GemmLayout, GemmShape, GemmTile};
+pub use gemm::{Gemm, GemmLayout, GemmShape, GemmTile, OperandScales};
 pub use loss::{ImageLoss, LossOutput, LossRows, LossValue};
 pub use scan::PrefixSum;
 pub use sort::{RadixSort, SortBuffers, SortCount};

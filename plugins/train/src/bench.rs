@@ -69,8 +69,10 @@ pub struct BenchReport {
     pub subgroups: bool,
     /// WGSL f16, in which F stores its forward maps.
     pub shader_f16: bool,
-    /// The adapter's cooperative matrix (tensor-core) shapes, "none" without; unused so far.
+    /// The adapter's cooperative matrix (tensor-core) shapes, "none" without.
     pub cooperative_matrices: String,
+    /// Cooperative matrices enabled (`COCOG_COOPERATIVE_MATRIX=1` where offered).
+    pub cooperative_f16: bool,
     pub width: u32,
     pub height: u32,
     pub views: usize,
@@ -423,6 +425,7 @@ fn measure(
         subgroups: gpu.subgroups,
         shader_f16: gpu.shader_f16,
         cooperative_matrices: gpu.cooperative_matrix_shapes(),
+        cooperative_f16: gpu.cooperative_f16,
         width,
         height,
         views: views.len(),
@@ -464,6 +467,12 @@ impl BenchReport {
             let path = match cocog_engine::nn::ConvPath::from_env() {
                 cocog_engine::nn::ConvPath::Gemm => "implicit GEMMs",
                 cocog_engine::nn::ConvPath::Tiled => "tiled (COCOG_F_CONV=tiled)",
+                cocog_engine::nn::ConvPath::Coop if self.cooperative_f16 => {
+                    "implicit GEMMs on tensor cores (COCOG_F_CONV=coop)"
+                }
+                cocog_engine::nn::ConvPath::Coop => {
+                    "implicit GEMMs (COCOG_F_CONV=coop asked, no cooperative matrices enabled)"
+                }
             };
             let maps = if self.shader_f16 {
                 "f16 maps"
@@ -496,7 +505,7 @@ impl BenchReport {
             .map_or("unknown".to_owned(), |b| format!("{:.0} MiB", mib(b)));
         format!(
             "adapter          {} (float atomics: {}, subgroups: {}, f16: {})\n\
-             tensor cores     {} (cooperative matrices; not used yet)\n\
+             tensor cores     {} (cooperative matrices; {})\n\
              source           {}\n\
              images           {} views at {}×{}{}\n\
              Gaussians        {} → {} (from iteration {})\n\
@@ -512,6 +521,11 @@ impl BenchReport {
             yes_no(self.subgroups),
             yes_no(self.shader_f16),
             self.cooperative_matrices,
+            if self.cooperative_f16 {
+                "enabled: COCOG_F_CONV=coop runs F on them"
+            } else {
+                "not enabled"
+            },
             self.source,
             self.views,
             self.width,
