@@ -32,6 +32,7 @@
 #                   the same views (peer_gsplat.py train)                          ~350 s + gsplat build
 #   idle-bench      `cocog bench` rows of sharp-dev at 100×75 and 1M random Gaussians at 1080p
 #   tests           the GPU test executables (f64 references, finite differences)      ~150 s
+#                   (TESTS="NAME ..." runs only those; gpu_coop_gemm alone takes seconds)
 #   gates SET...    bench/gates.sh's quality runs at once (--jobs 12), interrupted where they would
 #                   outrun the budget; the same command again continues them (e.g. `gates
 #                   12-small 12-variants`; a phase word ends the list)
@@ -158,6 +159,8 @@ phase_tests() {
     [[ -d "$work/tests" ]] || { mkdir -p "$work/tests" && tar xJf "$dev/tests.tar.xz" -C "$work"; } ||
         return 1
     for t in "$work"/tests/*; do
+        # TESTS="gpu_coop_gemm nn_compositor" runs those alone (default: every one).
+        [[ -z "${TESTS:-}" || " $TESTS " == *" $(basename "$t") "* ]] || continue
         echo "== $(basename "$t")"
         # The cooperative-matrix product's own test enables the experimental feature; no
         # other test does, so they test what training runs.
