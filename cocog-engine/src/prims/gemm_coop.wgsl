@@ -116,7 +116,9 @@ fn gemm_tile(
             if m0 + mm < gemm.m && kb + kk < k_end {
                 va = load_a(b, m0 + mm, kb + kk) * SCALE_A;
             }
-            slice_a[mm * BK + kk] = f16(va);
+            // Clamped as to_map clamps: an operand past f16's range would be inf, and inf × 0
+            // (padding) NaN.
+            slice_a[mm * BK + kk] = f16(clamp(va, -65504.0, 65504.0));
         }
         for (var e = lid; e < BN * BK; e += WG) {
             var nn = e % BN;
@@ -129,7 +131,7 @@ fn gemm_tile(
             if n0 + nn < gemm.n && kb + kk < k_end {
                 vb = load_b(b, kb + kk, n0 + nn) * SCALE_B;
             }
-            slice_b[kk * BN + nn] = f16(vb);
+            slice_b[kk * BN + nn] = f16(clamp(vb, -65504.0, 65504.0));
         }
         workgroupBarrier();
         for (var kk = 0u; kk < BK; kk += 16u) {
