@@ -164,7 +164,7 @@ impl Gemm {
             layout.a_k_fast,
             layout.b_k_fast,
             layout.split_k,
-            include_str!("gemm.wgsl"),
+            concat!(include_str!("gemm_common.wgsl"), include_str!("gemm.wgsl")),
             partials_source(layout.split_k),
         );
         let module = shader(ctx, label, &source);
@@ -217,7 +217,10 @@ impl Gemm {
             layout.split_k,
             scales.a,
             scales.b,
-            include_str!("gemm_coop.wgsl"),
+            concat!(
+                include_str!("gemm_common.wgsl"),
+                include_str!("gemm_coop.wgsl")
+            ),
             partials_source(layout.split_k),
         )
     }

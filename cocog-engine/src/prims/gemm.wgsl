@@ -16,29 +16,6 @@
 // sum over batches as well as K (grid z = batch × parts + part of K), e.g. a weight gradient
 // over every pixel of every image.
 
-struct GemmDims {
-    m: u32,
-    n: u32,
-    // K per batch.
-    k: u32,
-    // K per part (a multiple of BK) and parts per batch (1 without SPLIT).
-    k_split: u32,
-    parts: u32,
-    batches: u32,
-    // Problem parameters, named by the prelude.
-    u0: u32,
-    u1: u32,
-    u2: u32,
-    u3: u32,
-    u4: u32,
-    u5: u32,
-    u6: u32,
-    u7: u32,
-    u8: u32,
-    u9: u32,
-}
-
-@group(0) @binding(0) var<uniform> gemm: GemmDims;
 
 const WG: u32 = TY * TX;
 const BM: u32 = 4u * TY;
@@ -48,38 +25,6 @@ const BN: u32 = 4u * TX;
 var<workgroup> tile_a: array<vec4<f32>, BK * TY>;
 var<workgroup> tile_b: array<vec4<f32>, BK * TX>;
 
-// (n / d, n % d) for d ≥ 1 through f32 and one correction: CPU adapters scalarise integer
-// division, which then dominates a loader. Exact while n / d < 2^23.
-fn divmod(n: u32, d: u32) -> vec2<u32> {
-    var q = u32(f32(n) / f32(d));
-    let qd = q * d;
-    if qd > n {
-        q -= 1u;
-    } else if n - qd >= d {
-        q += 1u;
-    }
-    return vec2<u32>(q, n - q * d);
-}
-
-// Never runs (batches ≥ 1), but makes both entry points use every binding of the problem, so
-// one bind group serves both.
-fn touch_all() {
-    if gemm.batches == 0u {
-        store_partial(0u, 0u, 0u, load_partial(0u, 0u, 0u));
-        epilogue(0u, 0u, 0u, load_a(0u, 0u, 0u) + load_b(0u, 0u, 0u));
-    }
-}
-
-fn finish(b: u32, m: u32, n: u32, z: u32, v: f32) {
-    if m < gemm.m && n < gemm.n {
-        if SPLIT {
-            store_partial(z, m, n, v);
-        } else {
-            epilogue(b, m, n, v);
-        }
-    }
-}
-
 @compute @workgroup_size(WG)
 fn gemm_tile(
     @builtin(workgroup_id) wg: vec3<u32>,
@@ -87,19 +32,19 @@ fn gemm_tile(
     @builtin(local_invocation_index) lid: u32,
 ) {
     touch_all();
-    let tiles_n = (gemm.n + BN - 1u) / BN;
-    let tiles_m = (gemm.m + BM - 1u) / BM;
-    let tile = wg.y * nwg.x + wg.x;
-    if tile >= tiles_m * tiles_n {
+    // Inline, not in block_of: naga's uniformity analysis takes a call's result as
+    // non-uniform, and a return under it would put the cooperative products out of uniform
+    // control flow.
+    if wg.y * nwg.x + wg.x >= ((gemm.m + BM - 1u) / BM) * ((gemm.n + BN - 1u) / BN) {
         return;
     }
-    let m0 = (tile / tiles_n) * BM;
-    let n0 = (tile % tiles_n) * BN;
-    let z = wg.z;
-    let b = z / gemm.parts;
-    let part = z % gemm.parts;
-    let k_begin = part * gemm.k_split;
-    let k_end = min(gemm.k, k_begin + gemm.k_split);
+    let blk = block_of(wg, nwg);
+    let m0 = blk.m0;
+    let n0 = blk.n0;
+    let z = blk.z;
+    let b = blk.b;
+    let k_begin = blk.k_begin;
+    let k_end = blk.k_end;
     let tx = lid % TX;
     let ty = lid / TX;
     var acc0 = vec4<f32>(0.0);

@@ -9,27 +9,6 @@
 // accesses are not formally ordered by barriers across invocations; drivers order them in
 // practice, and the tests compare this product with the f32 one.
 
-struct GemmDims {
-    m: u32,
-    n: u32,
-    k: u32,
-    k_split: u32,
-    parts: u32,
-    batches: u32,
-    u0: u32,
-    u1: u32,
-    u2: u32,
-    u3: u32,
-    u4: u32,
-    u5: u32,
-    u6: u32,
-    u7: u32,
-    u8: u32,
-    u9: u32,
-}
-
-@group(0) @binding(0) var<uniform> gemm: GemmDims;
-
 const WG: u32 = 128u;
 const BM: u32 = 64u;
 const BN: u32 = 64u;
@@ -39,34 +18,6 @@ const BK: u32 = 32u;
 var<workgroup> slice_a: array<f16, 2048>;
 var<workgroup> slice_b: array<f16, 2048>;
 var<workgroup> block_c: array<f32, 1024>;
-
-fn divmod(n: u32, d: u32) -> vec2<u32> {
-    var q = u32(f32(n) / f32(d));
-    let qd = q * d;
-    if qd > n {
-        q -= 1u;
-    } else if n - qd >= d {
-        q += 1u;
-    }
-    return vec2<u32>(q, n - q * d);
-}
-
-fn touch_all() {
-    if gemm.batches == 0u {
-        store_partial(0u, 0u, 0u, load_partial(0u, 0u, 0u));
-        epilogue(0u, 0u, 0u, load_a(0u, 0u, 0u) + load_b(0u, 0u, 0u));
-    }
-}
-
-fn finish(b: u32, m: u32, n: u32, z: u32, v: f32) {
-    if m < gemm.m && n < gemm.n {
-        if SPLIT {
-            store_partial(z, m, n, v);
-        } else {
-            epilogue(b, m, n, v);
-        }
-    }
-}
 
 // Subgroup `sub`'s 16×16 block at (m, n), just stored in block_c, through `finish`.
 fn flush(sub: u32, lane: u32, b: u32, z: u32, m: u32, n: u32) {
@@ -83,19 +34,19 @@ fn gemm_tile(
     @builtin(local_invocation_index) lid: u32,
 ) {
     touch_all();
-    let tiles_n = (gemm.n + BN - 1u) / BN;
-    let tiles_m = (gemm.m + BM - 1u) / BM;
-    let tile = wg.y * nwg.x + wg.x;
-    if tile >= tiles_m * tiles_n {
+    // Inline, not in block_of: naga's uniformity analysis takes a call's result as
+    // non-uniform, and a return under it would put the cooperative products out of uniform
+    // control flow.
+    if wg.y * nwg.x + wg.x >= ((gemm.m + BM - 1u) / BM) * ((gemm.n + BN - 1u) / BN) {
         return;
     }
-    let m0 = (tile / tiles_n) * BM;
-    let n0 = (tile % tiles_n) * BN;
-    let z = wg.z;
-    let b = z / gemm.parts;
-    let part = z % gemm.parts;
-    let k_begin = part * gemm.k_split;
-    let k_end = min(gemm.k, k_begin + gemm.k_split);
+    let blk = block_of(wg, nwg);
+    let m0 = blk.m0;
+    let n0 = blk.n0;
+    let z = blk.z;
+    let b = blk.b;
+    let k_begin = blk.k_begin;
+    let k_end = blk.k_end;
     let sub = lid / 32u;
     let lane = lid % 32u;
     let sm = (sub / 2u) * 32u;
