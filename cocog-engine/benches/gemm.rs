@@ -1,36 +1,26 @@
 //! Matrix products at the shape of F's widest layer: the 3×3 64→64 convolution's forward as a
 //! plain GEMM (M = 64 output channels, K = 576 = 64 inputs × 9 taps, N = pixels of every render),
 //! on the f32 tiled product `Gemm` and, where the adapter has tensor cores and
-//! `COCOG_COOPERATIVE_MATRIX=1` enables them, the cooperative-matrix `CoopGemm` (f16 inputs);
-//! each product's largest difference from the other is printed beside its GFLOP/s.
+//! `COCOG_COOPERATIVE_MATRIX=1` enables them, the same product on cooperative matrices
+//! (`Gemm::cooperative`, f16 operands); their largest difference is printed beside the GFLOP/s.
 //!
 //! `cargo bench -p cocog-engine --bench gemm`; COCOG_BENCH_PIXELS [45056: six renders at 100×75,
 //! rounded up to 64; 400×300 is 720000], COCOG_BENCH_ITERS [20]. COCOG_ADAPTER picks the adapter.
 
 use std::time::Instant;
 
-use cocog_engine::{CoopGemm, Gemm, GemmLayout, GemmShape, GemmTile, GpuContext, Workspace};
+mod common;
+
+use cocog_engine::{
+    Gemm, GemmLayout, GemmShape, GemmTile, GpuContext, OperandScales, Recorder, Workspace,
+};
+use common::{env, noise};
 
 const M: u32 = 64;
 const K: u32 = 576;
 
-fn env(name: &str, default: u64) -> u64 {
-    std::env::var(name)
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
-}
-
-fn noise(state: &mut u64) -> f32 {
-    *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    let mut z = *state;
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32 - 0.5
-}
-
 /// Seconds per call of `record` (after one untimed call), over `iters` calls in one submission.
-fn time(ctx: &GpuContext, iters: u64, mut record: impl FnMut(&mut cocog_engine::Recorder)) -> f64 {
+fn time(ctx: &GpuContext, iters: u64, mut record: impl FnMut(&mut Recorder)) -> f64 {
     let mut rec = ctx.recorder();
     record(&mut rec);
     rec.submit();
@@ -54,29 +44,26 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut s = 1;
     // f16-representable values, so both products see the same inputs.
     let round = |v: f32| half::f16::from_f32(v).to_f32();
-    let a: Vec<f32> = (0..M * K).map(|_| round(noise(&mut s))).collect();
+    let a: Vec<f32> = (0..M * K).map(|_| round(noise(&mut s) - 0.5)).collect();
     let b: Vec<f32> = (0..K as u64 * u64::from(n))
-        .map(|_| round(noise(&mut s)))
+        .map(|_| round(noise(&mut s) - 0.5))
         .collect();
     let flop = 2.0 * f64::from(M) * f64::from(K) * f64::from(n);
     println!("problem: {M}×{n}×{K} ({:.2} GFLOP)", flop / 1e9);
 
-    let gemm = Gemm::new(
-        &ctx,
-        "bench gemm",
-        "@group(0) @binding(2) var<storage, read> a: array<f32>;\n\
+    let problem = "@group(0) @binding(2) var<storage, read> a: array<f32>;\n\
          @group(0) @binding(3) var<storage, read> b: array<f32>;\n\
          @group(0) @binding(4) var<storage, read_write> c: array<f32>;\n\
          fn load_a(bt: u32, m: u32, k: u32) -> f32 { return a[m * gemm.k + k]; }\n\
          fn load_b(bt: u32, k: u32, n: u32) -> f32 { return b[k * gemm.n + n]; }\n\
-         fn epilogue(bt: u32, m: u32, n: u32, v: f32) { c[m * gemm.n + n] = v; }\n",
-        GemmLayout {
-            a_k_fast: true,
-            b_k_fast: false,
-            split_k: false,
-            tile: GemmTile::for_shape(M, n),
-        },
-    );
+         fn epilogue(bt: u32, m: u32, n: u32, v: f32) { c[m * gemm.n + n] = v; }\n";
+    let layout = GemmLayout {
+        a_k_fast: true,
+        b_k_fast: false,
+        split_k: false,
+        tile: GemmTile::for_shape(M, n),
+    };
+    let gemm = Gemm::new(&ctx, "bench gemm", problem, layout);
     let (ga, gb) = (ctx.storage_from("a", &a), ctx.storage_from("b", &b));
     let gc = ctx.storage("c", u64::from(M) * u64::from(n) * 4);
     let mut ws = Workspace::default();
@@ -96,24 +83,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     let reference: Vec<f32> = ctx.read(&gc, (M * n) as usize)?;
 
-    let Some(coop) = CoopGemm::new(&ctx) else {
+    let Some(coop) = Gemm::cooperative(&ctx, "bench coop", problem, layout, OperandScales::NONE)
+    else {
         println!(
             "cooperative product:    not run (COCOG_COOPERATIVE_MATRIX=1 on an adapter with 16×16×16 f16→f32)"
         );
         return Ok(());
     };
-    let bits = |v: &[f32]| -> Vec<u16> {
-        v.iter()
-            .map(|&x| half::f16::from_f32(x).to_bits())
-            .collect()
-    };
-    let (ha, hb) = (
-        ctx.storage_from("a16", &bits(&a)),
-        ctx.storage_from("b16", &bits(&b)),
-    );
-    let hc = ctx.storage("c16", u64::from(M) * u64::from(n) * 4);
+    let hc = ctx.storage("c coop", u64::from(M) * u64::from(n) * 4);
     let tensor = time(&ctx, iters, |rec| {
-        coop.encode(rec, (M, n, K), &ha, &hb, &hc)
+        coop.encode(rec, &mut ws, shape, &[(2, &ga), (3, &gb), (4, &hc)]);
     });
     let got: Vec<f32> = ctx.read(&hc, (M * n) as usize)?;
     let worst = got

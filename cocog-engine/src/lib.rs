@@ -54,9 +54,8 @@ pub use crate::core::{
 };
 pub use error::EngineError;
 pub use prims::{
-    Adam, AdamConfig, AdamMoments, AddInto, CoopGemm, Gemm, GemmLayout, GemmShape, GemmTile,
-    ImageLoss, LossOutput, LossRows, LossValue, OperandScales, PrefixSum, RadixSort, SortBuffers,
-    SortCount,
+    Adam, AdamConfig, AdamMoments, AddInto, Gemm, GemmLayout, GemmShape, GemmTile, ImageLoss,
+    LossOutput, LossRows, LossValue, OperandScales, PrefixSum, RadixSort, SortBuffers, SortCount,
 };
 pub use splat::{
     Batch, Crop, ForwardState, Frame, Gradients, ImageSpec, ParamBuffers, RenderedImage, Renderer,

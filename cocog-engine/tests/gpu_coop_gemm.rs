@@ -1,86 +1,101 @@
-//! The experimental cooperative-matrix product (`CoopGemm`). Everywhere: its WGSL compiles to
-//! SPIR-V through naga (what wgpu runs on Vulkan), which caught a naga 30 bug that drops
-//! expressions written inside a `coopStore` call. Where an adapter has 16×16×16 f16→f32
-//! cooperative matrices (NVIDIA's tensor cores; no software adapter has them): with
-//! `COCOG_COOPERATIVE_MATRIX=1`, the product against an f64 one of the same f16 inputs.
+//! The experimental product on cooperative matrices (`Gemm::cooperative`, tensor cores), where
+//! an adapter has 16×16×16 f16→f32 ones (NVIDIA's; no software adapter has them) and
+//! `COCOG_COOPERATIVE_MATRIX=1` enables them: on plain matrices against an f64 product of the
+//! same f16-representable inputs, and as F's convolutions against the f32 products. Its WGSL is
+//! compiled to SPIR-V everywhere by conv_gemm's unit test.
 
 mod common;
 
-use cocog_engine::CoopGemm;
+use cocog_engine::{Gemm, GemmLayout, GemmShape, GemmTile, OperandScales, Workspace};
 use common::{Rng, gpu};
 
-#[test]
-fn coop_gemm_compiles_to_spirv() {
-    let source = CoopGemm::wgsl();
-    let module = naga::front::wgsl::parse_str(&source)
-        .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&source)));
-    let info = naga::valid::Validator::new(
-        naga::valid::ValidationFlags::all(),
-        naga::valid::Capabilities::all(),
-    )
-    .validate(&module)
-    .expect("valid module");
-    let options = naga::back::spv::Options {
-        lang_version: (1, 5),
-        ..Default::default()
-    };
-    let words = naga::back::spv::write_vec(&module, &info, &options, None).expect("SPIR-V");
-    assert_eq!(words[0], 0x0723_0203, "SPIR-V magic");
-}
+/// C = A·B of row-major A (M×K) and B (K×N); with split K, summed over the batches too.
+const PLAIN: &str = "@group(0) @binding(2) var<storage, read> a: array<f32>;
+@group(0) @binding(3) var<storage, read> b: array<f32>;
+@group(0) @binding(4) var<storage, read_write> c: array<f32>;
+fn load_a(bt: u32, m: u32, k: u32) -> f32 { return a[(bt * gemm.m + m) * gemm.k + k]; }
+fn load_b(bt: u32, k: u32, n: u32) -> f32 { return b[(bt * gemm.k + k) * gemm.n + n]; }
+fn epilogue(bt: u32, m: u32, n: u32, v: f32) { c[(bt * gemm.m + m) * gemm.n + n] = v; }
+";
 
 #[test]
-fn coop_gemm_matches_f64_where_the_adapter_has_tensor_cores() {
+fn cooperative_product_matches_f64_where_the_adapter_has_tensor_cores() {
     let Some(ctx) = gpu() else { return };
-    let Some(gemm) = CoopGemm::new(ctx) else {
-        // Asked for, on an adapter that offers the shape: only a subgroup width other than 32
-        // may refuse it, and that must not read as a pass on a GPU with tensor cores.
-        let asked = std::env::var("COCOG_COOPERATIVE_MATRIX").is_ok_and(|v| v == "1");
-        let offered = ctx.cooperative_matrix_shapes().contains("16×16×16 f16→f32");
-        assert!(
-            !(asked && offered && ctx.adapter_info.subgroup_min_size == 32),
-            "COCOG_COOPERATIVE_MATRIX=1 and {} offers 16×16×16 f16→f32, but the context did \
-             not enable it",
-            ctx.adapter_name()
-        );
-        eprintln!(
-            "skipped: {} has no 16×16×16 f16→f32 cooperative matrices enabled (offers: {}; \
-             COCOG_COOPERATIVE_MATRIX=1 enables them where offered)",
-            ctx.adapter_name(),
-            ctx.cooperative_matrix_shapes()
-        );
-        return;
-    };
-    let (m, n, k) = (128usize, 192usize, 96usize);
-    let mut rng = Rng::new(7);
-    let mut half = |len: usize| -> Vec<half::f16> {
-        (0..len)
-            .map(|_| half::f16::from_f32(rng.range_f32(-1.0, 1.0)))
-            .collect()
-    };
-    let (a, b) = (half(m * k), half(k * n));
-    let bits = |v: &[half::f16]| v.iter().map(|h| h.to_bits()).collect::<Vec<u16>>();
-    let ga = ctx.storage_from("a", &bits(&a));
-    let gb = ctx.storage_from("b", &bits(&b));
-    let gc = ctx.storage("c", (m * n * 4) as u64);
-    let mut rec = ctx.recorder();
-    gemm.encode(&mut rec, (m as u32, n as u32, k as u32), &ga, &gb, &gc);
-    rec.submit();
-    let got: Vec<f32> = ctx.read(&gc, m * n).expect("read C");
-    for i in 0..m {
-        for j in 0..n {
-            let (mut want, mut mag) = (0.0f64, 0.0f64);
-            for kk in 0..k {
-                let p = f64::from(a[i * k + kk].to_f32()) * f64::from(b[kk * n + j].to_f32());
-                want += p;
-                mag += p.abs();
-            }
-            let g = f64::from(got[i * n + j]);
-            // f16 × f16 is exact in f32; the error is the f32 accumulation's.
-            let tol = 1e-5 * mag + 1e-6;
+    // Sizes off the 64 × 64 × 32 blocks, so edges are padded; split K sums 3 batches in parts.
+    for (split_k, (m, n, k, batches)) in [(false, (70, 130, 45, 2)), (true, (20, 33, 700, 3))] {
+        let layout = GemmLayout {
+            a_k_fast: true,
+            b_k_fast: false,
+            split_k,
+            tile: GemmTile::SQUARE,
+        };
+        let scales = OperandScales { a: 4.0, b: 0.5 };
+        let Some(gemm) = Gemm::cooperative(ctx, "coop test", PLAIN, layout, scales) else {
+            // Asked for, on an adapter that offers the shape: only a subgroup width other than
+            // 32 may refuse it, and that must not read as a pass on a GPU with tensor cores.
+            let asked = std::env::var("COCOG_COOPERATIVE_MATRIX").is_ok_and(|v| v == "1");
+            let offered = ctx.cooperative_matrix_shapes().contains("16×16×16 f16→f32");
             assert!(
-                (g - want).abs() <= tol,
-                "C[{i}][{j}] = {g}, want {want} (±{tol})"
+                !(asked && offered && ctx.adapter_info.subgroup_min_size == 32),
+                "COCOG_COOPERATIVE_MATRIX=1 and {} offers 16×16×16 f16→f32, but the context \
+                 did not enable it",
+                ctx.adapter_name()
             );
+            eprintln!(
+                "skipped: {} has no 16×16×16 f16→f32 cooperative matrices enabled (offers: {}; \
+                 COCOG_COOPERATIVE_MATRIX=1 enables them where offered)",
+                ctx.adapter_name(),
+                ctx.cooperative_matrix_shapes()
+            );
+            return;
+        };
+        let mut rng = Rng::new(7);
+        // f16-representable inputs, so the f64 product sees what the tensor cores multiply.
+        let mut half = |len: usize| -> Vec<f32> {
+            (0..len)
+                .map(|_| half::f16::from_f32(rng.range_f32(-1.0, 1.0)).to_f32())
+                .collect()
+        };
+        let (a, b) = (half(batches * m * k), half(batches * k * n));
+        let outputs = if split_k { 1 } else { batches };
+        let ga = ctx.storage_from("a", &a);
+        let gb = ctx.storage_from("b", &b);
+        let gc = ctx.storage("c", (outputs * m * n * 4) as u64);
+        let mut ws = Workspace::default();
+        let mut rec = ctx.recorder();
+        let shape = GemmShape {
+            m: m as u32,
+            n: n as u32,
+            k: k as u32,
+            batches: batches as u32,
+            ..Default::default()
+        };
+        gemm.encode(&mut rec, &mut ws, shape, &[(2, &ga), (3, &gb), (4, &gc)]);
+        rec.submit();
+        let got: Vec<f32> = ctx.read(&gc, outputs * m * n).expect("read C");
+        for o in 0..outputs {
+            let summed = if split_k { 0..batches } else { o..o + 1 };
+            for i in 0..m {
+                for j in 0..n {
+                    let (mut want, mut mag) = (0.0f64, 0.0f64);
+                    for bt in summed.clone() {
+                        for kk in 0..k {
+                            let p = f64::from(a[(bt * m + i) * k + kk])
+                                * f64::from(b[(bt * k + kk) * n + j]);
+                            want += p;
+                            mag += p.abs();
+                        }
+                    }
+                    let g = f64::from(got[(o * m + i) * n + j]);
+                    // f16 × f16 is exact in f32 (and the power-of-two scales are exact); the
+                    // error is the f32 accumulation's.
+                    let tol = 1e-5 * mag + 1e-6;
+                    assert!(
+                        (g - want).abs() <= tol,
+                        "split {split_k}: C[{o}][{i}][{j}] = {g}, want {want} (±{tol})"
+                    );
+                }
+            }
         }
     }
 }
@@ -95,7 +110,6 @@ fn coop_gemm_matches_f64_where_the_adapter_has_tensor_cores() {
 /// miss too. 80 channels and 26×24 pixels give two row blocks and several split-K parts.
 #[test]
 fn compositor_on_tensor_cores_matches_the_f32_products() {
-    use cocog_engine::Workspace;
     use cocog_engine::nn::{CompositeMode, Compositor, CompositorConfig, ConvPath, MapPrecision};
     let Some(ctx) = gpu() else { return };
     if !ctx.cooperative_f16 {

@@ -29,7 +29,7 @@ pub struct GpuContext {
     /// feature. Recorded so benchmarks say what a device could give F's convolutions.
     pub cooperative_matrices: Vec<wgpu::CooperativeMatrixProperties>,
     /// wgpu's experimental cooperative matrices are enabled, with 16×16×16 f16→f32 products
-    /// and 32-wide subgroups (`prims::CoopGemm`). Off unless `COCOG_COOPERATIVE_MATRIX` asks:
+    /// and 32-wide subgroups (`Gemm::cooperative`). Off unless `COCOG_COOPERATIVE_MATRIX` asks:
     /// wgpu marks the feature as possibly unsound, and no kernel of a training step uses it.
     pub cooperative_f16: bool,
     pub memory: Arc<MemoryTracker>,

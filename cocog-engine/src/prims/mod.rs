@@ -4,7 +4,6 @@
 
 mod adam;
 mod add;
-mod coop_gemm;
 mod gemm;
 mod loss;
 mod scan;
@@ -12,7 +11,6 @@ mod sort;
 
 pub use adam::{Adam, AdamConfig, AdamMoments};
 pub use add::AddInto;
-pub use coop_gemm::CoopGemm;
 pub use gemm::{Gemm, GemmLayout, GemmShape, GemmTile, OperandScales};
 pub use loss::{ImageLoss, LossOutput, LossRows, LossValue};
 pub use scan::PrefixSum;
