@@ -86,7 +86,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let Some(coop) = Gemm::cooperative(&ctx, "bench coop", problem, layout, OperandScales::NONE)
     else {
         println!(
-            "cooperative product:    not run (COCOG_COOPERATIVE_MATRIX=1 on an adapter with 16×16×16 f16→f32)"
+            "cooperative product:    not run (COCOG_COOPERATIVE_MATRIX=1 on an adapter with 16×16×16 or 8×8×8 f16→f32)"
         );
         return Ok(());
     };

@@ -48,9 +48,9 @@ mod splats;
 mod types;
 
 pub use crate::core::{
-    Bind, CounterSnapshot, Counters, GpuBuffer, GpuContext, Kernel, KernelProfiler, KernelTime,
-    MemoryTracker, Readback, Recorder, UniformSlot, Workspace, device_select_probe_is_futile,
-    quiet_headless_vulkan, shader, test_gpu,
+    Bind, CoopFragments, CounterSnapshot, Counters, GpuBuffer, GpuContext, Kernel, KernelProfiler,
+    KernelTime, MemoryTracker, Readback, Recorder, UniformSlot, Workspace,
+    device_select_probe_is_futile, quiet_headless_vulkan, shader, test_gpu,
 };
 pub use error::EngineError;
 pub use prims::{

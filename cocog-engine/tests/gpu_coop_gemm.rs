@@ -1,12 +1,14 @@
-//! The experimental product on cooperative matrices (`Gemm::cooperative`, tensor cores), where
-//! an adapter has 16×16×16 f16→f32 ones (NVIDIA's; no software adapter has them) and
-//! `COCOG_COOPERATIVE_MATRIX=1` enables them: on plain matrices against an f64 product of the
-//! same f16-representable inputs, and as F's convolutions against the f32 products. Its WGSL is
-//! compiled to SPIR-V everywhere by conv_gemm's unit test.
+//! The experimental product on cooperative matrices (`Gemm::cooperative`), where an adapter
+//! has square f16→f32 ones (NVIDIA's tensor cores: 16×16×16; lavapipe in Mesa 26.2: 8×8×8)
+//! and `COCOG_COOPERATIVE_MATRIX=1` enables them: on plain matrices against an f64 product of
+//! the same f16-representable inputs, and as F's convolutions against the f32 products. Its WGSL
+//! is compiled to SPIR-V everywhere by conv_gemm's unit test.
 
 mod common;
 
-use cocog_engine::{Gemm, GemmLayout, GemmShape, GemmTile, OperandScales, Workspace};
+use cocog_engine::{
+    CoopFragments, Gemm, GemmLayout, GemmShape, GemmTile, OperandScales, Workspace,
+};
 use common::{Rng, gpu};
 
 /// C = A·B of row-major A (M×K) and B (K×N); with split K, summed over the batches too.
@@ -18,10 +20,39 @@ fn load_b(bt: u32, k: u32, n: u32) -> f32 { return b[(bt * gemm.k + k) * gemm.n 
 fn epilogue(bt: u32, m: u32, n: u32, v: f32) { c[(bt * gemm.m + m) * gemm.n + n] = v; }
 ";
 
+/// Prints why the test does not run; fails instead where it was asked for
+/// (`COCOG_COOPERATIVE_MATRIX=1`) on an adapter that offers what the kernel needs, so a context
+/// that wrongly declines cannot read as a pass on a GPU with tensor cores.
+fn skip_unless_refused(ctx: &cocog_engine::GpuContext) {
+    let asked = std::env::var("COCOG_COOPERATIVE_MATRIX").is_ok_and(|v| v == "1");
+    let info = &ctx.adapter_info;
+    let usable = CoopFragments::choose(
+        &ctx.cooperative_matrices,
+        info.subgroup_min_size,
+        info.subgroup_max_size,
+    );
+    assert!(
+        !(asked && ctx.shader_f16 && usable.is_some()),
+        "COCOG_COOPERATIVE_MATRIX=1 and {} offers {usable:?}, but the context did not enable \
+         cooperative matrices",
+        ctx.adapter_name()
+    );
+    eprintln!(
+        "skipped: {} has no square f16→f32 cooperative matrices enabled (offers: {}; subgroups \
+         {}..={} wide; COCOG_COOPERATIVE_MATRIX=1 enables 16×16×16 or 8×8×8 where subgroups have \
+         one width)",
+        ctx.adapter_name(),
+        ctx.cooperative_matrix_shapes(),
+        info.subgroup_min_size,
+        info.subgroup_max_size,
+    );
+}
+
 #[test]
-fn cooperative_product_matches_f64_where_the_adapter_has_tensor_cores() {
+fn cooperative_product_matches_f64_where_the_adapter_has_them() {
     let Some(ctx) = gpu() else { return };
-    // Sizes off the 64 × 64 × 32 blocks, so edges are padded; split K sums 3 batches in parts.
+    // Sizes off the blocks (64 × 64 × 32 on 16-wide fragments, 32 × 32 × 16 on 8-wide), so
+    // edges are padded; split K sums 3 batches in parts.
     for (split_k, (m, n, k, batches)) in [(false, (70, 130, 45, 2)), (true, (20, 33, 700, 3))] {
         let layout = GemmLayout {
             a_k_fast: true,
@@ -31,22 +62,7 @@ fn cooperative_product_matches_f64_where_the_adapter_has_tensor_cores() {
         };
         let scales = OperandScales { a: 4.0, b: 0.5 };
         let Some(gemm) = Gemm::cooperative(ctx, "coop test", PLAIN, layout, scales) else {
-            // Asked for, on an adapter that offers the shape: only a subgroup width other than
-            // 32 may refuse it, and that must not read as a pass on a GPU with tensor cores.
-            let asked = std::env::var("COCOG_COOPERATIVE_MATRIX").is_ok_and(|v| v == "1");
-            let offered = ctx.cooperative_matrix_shapes().contains("16×16×16 f16→f32");
-            assert!(
-                !(asked && offered && ctx.adapter_info.subgroup_min_size == 32),
-                "COCOG_COOPERATIVE_MATRIX=1 and {} offers 16×16×16 f16→f32, but the context \
-                 did not enable it",
-                ctx.adapter_name()
-            );
-            eprintln!(
-                "skipped: {} has no 16×16×16 f16→f32 cooperative matrices enabled (offers: {}; \
-                 COCOG_COOPERATIVE_MATRIX=1 enables them where offered)",
-                ctx.adapter_name(),
-                ctx.cooperative_matrix_shapes()
-            );
+            skip_unless_refused(ctx);
             return;
         };
         let mut rng = Rng::new(7);
@@ -109,16 +125,11 @@ fn cooperative_product_matches_f64_where_the_adapter_has_tensor_cores() {
 /// value, as a real one over a frame: unscaled, its products would fall to f16's subnormals and
 /// miss too. 80 channels and 26×24 pixels give two row blocks and several split-K parts.
 #[test]
-fn compositor_on_tensor_cores_matches_the_f32_products() {
+fn compositor_on_cooperative_matrices_matches_the_f32_products() {
     use cocog_engine::nn::{CompositeMode, Compositor, CompositorConfig, ConvPath, MapPrecision};
     let Some(ctx) = gpu() else { return };
-    if !ctx.cooperative_f16 {
-        eprintln!(
-            "skipped: {} has no cooperative matrices enabled (COCOG_COOPERATIVE_MATRIX=1 where \
-             16×16×16 f16→f32 is offered; offers: {})",
-            ctx.adapter_name(),
-            ctx.cooperative_matrix_shapes()
-        );
+    if ctx.cooperative.is_none() {
+        skip_unless_refused(ctx);
         return;
     }
     let (channels, images, h, w) = (80u32, 3u32, 26u32, 24u32);

@@ -13,6 +13,42 @@ pub(crate) const REQUIRED_STORAGE_BUFFERS: u32 = 12;
 /// The rasterizer stages one batch of 256 projected Gaussians (48 B each) in shared memory.
 pub(crate) const REQUIRED_WORKGROUP_STORAGE: u32 = 16 * 1024;
 
+/// The f16→f32 cooperative-matrix products `Gemm::cooperative` builds on: `side`×`side`×`side`
+/// fragments (16 on NVIDIA's tensor cores, 8 on lavapipe in Mesa 26.2; 25.0 has none), multiplied by
+/// subgroups of a fixed `subgroup` width.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CoopFragments {
+    pub side: u32,
+    pub subgroup: u32,
+}
+
+impl CoopFragments {
+    /// The largest square f16→f32 shape `offered` of 16 or 8, for adapters whose subgroups
+    /// have one width (the kernel lays four subgroups over a workgroup) of at most 64.
+    pub fn choose(
+        offered: &[wgpu::CooperativeMatrixProperties],
+        subgroup_min: u32,
+        subgroup_max: u32,
+    ) -> Option<Self> {
+        use wgpu::CooperativeScalarType::{F16, F32};
+        if subgroup_min != subgroup_max || !(1..=64).contains(&subgroup_min) {
+            return None;
+        }
+        [16, 8].into_iter().find_map(|side| {
+            offered
+                .iter()
+                .any(|c| {
+                    (c.m_size, c.n_size, c.k_size, c.ab_type, c.cr_type)
+                        == (side, side, side, F16, F32)
+                })
+                .then_some(Self {
+                    side,
+                    subgroup: subgroup_min,
+                })
+        })
+    }
+}
+
 /// A wgpu device plus what the engine learned about it.
 pub struct GpuContext {
     pub device: wgpu::Device,
@@ -28,10 +64,10 @@ pub struct GpuContext {
     /// `VK_KHR_cooperative_matrix` reports them; wgpu exposes them to WGSL as an experimental
     /// feature. Recorded so benchmarks say what a device could give F's convolutions.
     pub cooperative_matrices: Vec<wgpu::CooperativeMatrixProperties>,
-    /// wgpu's experimental cooperative matrices are enabled, with 16×16×16 f16→f32 products
-    /// and 32-wide subgroups (`Gemm::cooperative`). Off unless `COCOG_COOPERATIVE_MATRIX` asks:
-    /// wgpu marks the feature as possibly unsound, and no kernel of a training step uses it.
-    pub cooperative_f16: bool,
+    /// wgpu's experimental cooperative matrices, enabled with these square f16→f32 fragments
+    /// (`Gemm::cooperative`). Off unless `COCOG_COOPERATIVE_MATRIX` asks: wgpu marks the
+    /// feature as possibly unsound, and no kernel of a training step uses it by default.
+    pub cooperative: Option<CoopFragments>,
     pub memory: Arc<MemoryTracker>,
     /// Buffers created, blocking reads, submissions, dispatches: see `Counters`.
     pub counters: Counters,
@@ -172,19 +208,21 @@ impl GpuContext {
         let shader_f16 =
             adapter.features().contains(wgpu::Features::SHADER_F16) && !switched_on("COCOG_NO_F16");
         let cooperative_matrices = adapter.cooperative_matrix_properties();
-        let cooperative_f16 = switched_on("COCOG_COOPERATIVE_MATRIX")
+        let cooperative = (switched_on("COCOG_COOPERATIVE_MATRIX")
             && shader_f16
-            && info.subgroup_min_size == 32
-            && info.subgroup_max_size == 32
             && adapter
                 .features()
-                .contains(wgpu::Features::EXPERIMENTAL_COOPERATIVE_MATRIX)
-            && cooperative_matrices.iter().any(|c| {
-                use wgpu::CooperativeScalarType::{F16, F32};
-                (c.m_size, c.n_size, c.k_size, c.ab_type, c.cr_type) == (16, 16, 16, F16, F32)
-            });
+                .contains(wgpu::Features::EXPERIMENTAL_COOPERATIVE_MATRIX))
+        .then(|| {
+            CoopFragments::choose(
+                &cooperative_matrices,
+                info.subgroup_min_size,
+                info.subgroup_max_size,
+            )
+        })
+        .flatten();
         let mut required_features = wgpu::Features::empty();
-        if cooperative_f16 {
+        if cooperative.is_some() {
             required_features |= wgpu::Features::EXPERIMENTAL_COOPERATIVE_MATRIX;
         }
         if shader_f16 {
@@ -215,7 +253,7 @@ impl GpuContext {
                 // SAFETY: asked for only under COCOG_COOPERATIVE_MATRIX; then wgpu may let
                 // a wrong cooperative-matrix shader misbehave, which the kernel's f64 test
                 // is there to catch on the device.
-                experimental_features: if cooperative_f16 {
+                experimental_features: if cooperative.is_some() {
                     unsafe { wgpu::ExperimentalFeatures::enabled() }
                 } else {
                     wgpu::ExperimentalFeatures::disabled()
@@ -229,7 +267,7 @@ impl GpuContext {
             subgroups,
             shader_f16,
             cooperative_matrices,
-            cooperative_f16,
+            cooperative,
             memory: Arc::default(),
             counters: Counters::default(),
             profiler: KernelProfiler::default(),
@@ -301,6 +339,38 @@ mod tests {
             super::shapes(&[shape(16, 8, 16, F16, F32), shape(8, 8, 8, F32, F32)]),
             "16×8×16 f16→f32, 8×8×8 f32→f32"
         );
+    }
+
+    /// NVIDIA's 16-wide fragments first, lavapipe's 8-wide ones otherwise; only f16→f32, only
+    /// square, and only where every subgroup has the one width the kernel lays out.
+    #[test]
+    fn cooperative_fragments_are_square_f16_to_f32_on_fixed_subgroups() {
+        use super::CoopFragments;
+        use wgpu::CooperativeScalarType::{F16, F32};
+        let shape = |m, n, k, ab, cr| wgpu::CooperativeMatrixProperties {
+            m_size: m,
+            n_size: n,
+            k_size: k,
+            ab_type: ab,
+            cr_type: cr,
+            saturating_accumulation: false,
+        };
+        let nvidia = [
+            shape(16, 8, 16, F16, F32),
+            shape(16, 16, 16, F16, F16),
+            shape(8, 8, 8, F16, F32),
+            shape(16, 16, 16, F16, F32),
+        ];
+        let lavapipe = [shape(8, 8, 8, F16, F16), shape(8, 8, 8, F16, F32)];
+        let got = |offered: &[_], lo, hi| CoopFragments::choose(offered, lo, hi);
+        let frag = |side, subgroup| Some(CoopFragments { side, subgroup });
+        assert_eq!(got(&nvidia, 32, 32), frag(16, 32));
+        assert_eq!(got(&lavapipe, 8, 8), frag(8, 8));
+        assert_eq!(got(&lavapipe, 4, 8), None);
+        assert_eq!(got(&lavapipe, 128, 128), None);
+        assert_eq!(got(&[shape(16, 16, 16, F16, F16)], 32, 32), None);
+        assert_eq!(got(&[shape(16, 8, 16, F16, F32)], 32, 32), None);
+        assert_eq!(got(&[], 32, 32), None);
     }
 
     #[test]

@@ -13,7 +13,7 @@ mod recorder;
 mod workspace;
 
 pub use buffers::{GpuBuffer, MemoryTracker};
-pub use context::{GpuContext, test_gpu};
+pub use context::{CoopFragments, GpuContext, test_gpu};
 pub use counters::{CounterSnapshot, Counters};
 pub use headless::{device_select_probe_is_futile, quiet_headless_vulkan};
 #[cfg(test)]

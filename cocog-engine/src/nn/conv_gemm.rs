@@ -374,16 +374,29 @@ impl ConvGemm {
 mod tests {
     use super::*;
 
-    /// Every convolution product compiles for tensor cores (naga to SPIR-V, as wgpu does on
-    /// Vulkan) at both map precisions: no local adapter has cooperative matrices to run them.
+    /// Every convolution product compiles for cooperative matrices (naga to SPIR-V, as wgpu
+    /// does on Vulkan) at both map precisions, on NVIDIA's fragments and lavapipe's: CI's
+    /// adapter has none to run them.
     #[test]
     fn every_product_compiles_on_cooperative_matrices() {
-        for precision in [MapPrecision::F32, MapPrecision::F16] {
+        let nvidia = crate::CoopFragments {
+            side: 16,
+            subgroup: 32,
+        };
+        let lavapipe = crate::CoopFragments {
+            side: 8,
+            subgroup: 8,
+        };
+        for (fragments, precision) in [
+            (nvidia, MapPrecision::F32),
+            (nvidia, MapPrecision::F16),
+            (lavapipe, MapPrecision::F16),
+        ] {
             for (ks, cin, input) in [(3, 64, "map_t"), (5, 3, "f32")] {
                 for p in problems(64, ks, cin, precision, input) {
                     // As `shader` hands it to wgpu: enables first.
                     let source = crate::core::hoist_enables(&Gemm::cooperative_source(
-                        &p.source, p.layout, p.scales,
+                        &p.source, p.layout, p.scales, fragments,
                     ));
                     let module = naga::front::wgsl::parse_str(&source).unwrap_or_else(|e| {
                         panic!("{} ({precision:?}): {}", p.label, e.emit_to_string(&source))

@@ -4,7 +4,7 @@
 //! Gaussian or pixel) split K across workgroups and add the partial products in a fixed order,
 //! so results are reproducible.
 
-use crate::core::{Bind, GpuContext, Kernel, Recorder, Workspace, shader};
+use crate::core::{Bind, CoopFragments, GpuContext, Kernel, Recorder, Workspace, shader};
 
 /// Workgroups along x before the tile grid folds into y.
 const MAX_GRID_X: u32 = 65_535;
@@ -124,8 +124,9 @@ pub struct Gemm {
     layout: GemmLayout,
     tile: Kernel,
     reduce: Option<Kernel>,
-    /// The tile kernel is gemm_coop.wgsl's (64 × 64 blocks, 32-deep slices).
-    cooperative: bool,
+    /// The tile kernel is gemm_coop.wgsl's, on these fragments (blocks of 4 × 4 fragments,
+    /// slices 2 deep).
+    cooperative: Option<CoopFragments>,
 }
 
 /// Powers of two that scale A and B before gemm_coop.wgsl rounds them to f16 (undone on C), so
@@ -174,13 +175,13 @@ impl Gemm {
             reduce: layout.split_k.then(|| {
                 Kernel::labelled(ctx, &module, "gemm_reduce", &format!("{label} (reduce)"))
             }),
-            cooperative: false,
+            cooperative: None,
         }
     }
 
     /// `new`'s product on cooperative matrices (gemm_coop.wgsl: f16 operands scaled by
-    /// `scales`, f32 sums), where the context enabled them (`GpuContext::cooperative_f16`);
-    /// `None` elsewhere. `layout.tile` is ignored: blocks are 64 × 64.
+    /// `scales`, f32 sums), where the context enabled them (`GpuContext::cooperative`);
+    /// `None` elsewhere. `layout.tile` is ignored: blocks are 4 × 4 fragments.
     pub fn cooperative(
         ctx: &GpuContext,
         label: &str,
@@ -188,10 +189,8 @@ impl Gemm {
         layout: GemmLayout,
         scales: OperandScales,
     ) -> Option<Self> {
-        if !ctx.cooperative_f16 {
-            return None;
-        }
-        let source = Self::cooperative_source(problem, layout, scales);
+        let fragments = ctx.cooperative?;
+        let source = Self::cooperative_source(problem, layout, scales, fragments);
         let module = shader(ctx, label, &source);
         // The split-K sum is gemm.wgsl's, over the same partials.
         let reduce = layout.split_k.then(|| {
@@ -202,35 +201,43 @@ impl Gemm {
             layout,
             tile: Kernel::labelled(ctx, &module, "gemm_tile", &format!("{label} (coop)")),
             reduce,
-            cooperative: true,
+            cooperative: Some(fragments),
         })
     }
 
     /// gemm_coop.wgsl after `problem`, enables included (tests compile it without a device).
-    pub fn cooperative_source(problem: &str, layout: GemmLayout, scales: OperandScales) -> String {
+    pub fn cooperative_source(
+        problem: &str,
+        layout: GemmLayout,
+        scales: OperandScales,
+        fragments: CoopFragments,
+    ) -> String {
+        let side = fragments.side;
+        let body = concat!(
+            include_str!("gemm_common.wgsl"),
+            include_str!("gemm_coop.wgsl")
+        )
+        .replace("coop_mat16x16", &format!("coop_mat{side}x{side}"));
         format!(
             "enable f16;\nenable wgpu_cooperative_matrix;\n\
              const A_K_FAST: bool = {};\nconst B_K_FAST: bool = {};\nconst SPLIT: bool = {};\n\
-             const SCALE_A: f32 = {:?};\nconst SCALE_B: f32 = {:?};\n{}\n{problem}\n{}",
+             const SCALE_A: f32 = {:?};\nconst SCALE_B: f32 = {:?};\n\
+             const FR: u32 = {side}u;\nconst SG: u32 = {}u;\n{body}\n{problem}\n{}",
             layout.a_k_fast,
             layout.b_k_fast,
             layout.split_k,
             scales.a,
             scales.b,
-            concat!(
-                include_str!("gemm_common.wgsl"),
-                include_str!("gemm_coop.wgsl")
-            ),
+            fragments.subgroup,
             partials_source(layout.split_k),
         )
     }
 
     /// Rows, columns and depth of a block of C.
     fn block(&self) -> (u32, u32, u32) {
-        if self.cooperative {
-            (64, 64, 32)
-        } else {
-            self.layout.tile.dims()
+        match self.cooperative {
+            Some(f) => (4 * f.side, 4 * f.side, 2 * f.side),
+            None => self.layout.tile.dims(),
         }
     }
 

@@ -1,29 +1,32 @@
 // gemm.wgsl's product on cooperative matrices (tensor cores): the same problem prelude (load_a,
-// load_b, epilogue, store_partial, load_partial, A_K_FAST, B_K_FAST, SPLIT) and the same grid,
-// with 64×64 blocks of C from 32-deep slices. A workgroup is four 32-wide subgroups, taken to
-// hold consecutive invocations (as on NVIDIA; Vulkan does not promise it), each accumulating a
-// 32×32 quarter in f32 from slices staged in f16. The prelude also defines SCALE_A and SCALE_B,
-// powers of two applied before the f16 rounding and undone after: a gradient spread over every
-// pixel lies below f16's normal range (6.1e-5) and would lose its digits or flush to zero.
-// Under the Vulkan memory model, which cooperative matrices bring, naga 30's plain workgroup
-// accesses are not formally ordered by barriers across invocations; drivers order them in
-// practice, and the tests compare this product with the f32 one.
+// load_b, epilogue, store_partial, load_partial, A_K_FAST, B_K_FAST, SPLIT) and the same grid.
+// The prelude also sets FR, the side of the adapter's square f16→f32 fragments (16 on NVIDIA,
+// 8 on lavapipe; the type name coop_mat16x16 is rewritten to match), and SG, its fixed
+// subgroup width. A workgroup is four subgroups, taken to hold consecutive invocations (true on
+// NVIDIA and lavapipe; Vulkan does not promise it), each accumulating a 2FR × 2FR quarter of a
+// 4FR × 4FR block of C in f32, from 2FR-deep slices staged in f16. SCALE_A and SCALE_B, also the
+// prelude's, are powers of two applied before the f16 rounding and undone after: a gradient
+// spread over every pixel lies below f16's normal range (6.1e-5) and would lose its digits or
+// flush to zero. Under the Vulkan memory model, which cooperative matrices bring, naga 30's
+// plain workgroup accesses are not formally ordered by barriers across invocations; drivers
+// order them in practice, and the tests compare this product with the f32 one.
 
-const WG: u32 = 128u;
-const BM: u32 = 64u;
-const BN: u32 = 64u;
-const BK: u32 = 32u;
+const WG: u32 = 4u * SG;
+const BM: u32 = 4u * FR;
+const BN: u32 = 4u * FR;
+const BK: u32 = 2u * FR;
+const FRAG: u32 = FR * FR;
 
-// [BM][BK] and [BK][BN]; then each subgroup's 16×16 block of C on its way to `finish`.
-var<workgroup> slice_a: array<f16, 2048>;
-var<workgroup> slice_b: array<f16, 2048>;
-var<workgroup> block_c: array<f32, 1024>;
+// [BM][BK] and [BK][BN]; then each subgroup's fragment of C on its way to `finish`.
+var<workgroup> slice_a: array<f16, BM * BK>;
+var<workgroup> slice_b: array<f16, BK * BN>;
+var<workgroup> block_c: array<f32, 4u * FRAG>;
 
-// Subgroup `sub`'s 16×16 block at (m, n), just stored in block_c, through `finish`.
+// Subgroup `sub`'s fragment at (m, n), just stored in block_c, through `finish`.
 fn flush(sub: u32, lane: u32, b: u32, z: u32, m: u32, n: u32) {
-    for (var i = lane; i < 256u; i += 32u) {
-        let v = block_c[sub * 256u + i] / (SCALE_A * SCALE_B);
-        finish(b, m + i / 16u, n + i % 16u, z, v);
+    for (var i = lane; i < FRAG; i += SG) {
+        let v = block_c[sub * FRAG + i] / (SCALE_A * SCALE_B);
+        finish(b, m + i / FR, n + i % FR, z, v);
     }
 }
 
@@ -47,10 +50,10 @@ fn gemm_tile(
     let b = blk.b;
     let k_begin = blk.k_begin;
     let k_end = blk.k_end;
-    let sub = lid / 32u;
-    let lane = lid % 32u;
-    let sm = (sub / 2u) * 32u;
-    let sn = (sub % 2u) * 32u;
+    let sub = lid / SG;
+    let lane = lid % SG;
+    let sm = (sub / 2u) * 2u * FR;
+    let sn = (sub % 2u) * 2u * FR;
     var c00 = coop_mat16x16<f32, C>();
     var c01 = coop_mat16x16<f32, C>();
     var c10 = coop_mat16x16<f32, C>();
@@ -85,11 +88,11 @@ fn gemm_tile(
             slice_b[kk * BN + nn] = f16(clamp(vb, -65504.0, 65504.0));
         }
         workgroupBarrier();
-        for (var kk = 0u; kk < BK; kk += 16u) {
+        for (var kk = 0u; kk < BK; kk += FR) {
             let a0 = coopLoadT<coop_mat16x16<f16, A>>(&slice_a[sm * BK + kk], BK);
-            let a1 = coopLoadT<coop_mat16x16<f16, A>>(&slice_a[(sm + 16u) * BK + kk], BK);
+            let a1 = coopLoadT<coop_mat16x16<f16, A>>(&slice_a[(sm + FR) * BK + kk], BK);
             let b0 = coopLoadT<coop_mat16x16<f16, B>>(&slice_b[kk * BN + sn], BN);
-            let b1 = coopLoadT<coop_mat16x16<f16, B>>(&slice_b[kk * BN + sn + 16u], BN);
+            let b1 = coopLoadT<coop_mat16x16<f16, B>>(&slice_b[kk * BN + sn + FR], BN);
             c00 = coopMultiplyAdd(a0, b0, c00);
             c01 = coopMultiplyAdd(a0, b1, c01);
             c10 = coopMultiplyAdd(a1, b0, c10);
@@ -98,22 +101,22 @@ fn gemm_tile(
         workgroupBarrier();
     }
     // naga 30 emits no expression inside a coopStore call's arguments: bind them first.
-    let mine = sub * 256u;
+    let mine = sub * FRAG;
     let m = m0 + sm;
     let n = n0 + sn;
-    coopStoreT(c00, &block_c[mine], 16u);
+    coopStoreT(c00, &block_c[mine], FR);
     workgroupBarrier();
     flush(sub, lane, b, z, m, n);
     workgroupBarrier();
-    coopStoreT(c01, &block_c[mine], 16u);
+    coopStoreT(c01, &block_c[mine], FR);
     workgroupBarrier();
-    flush(sub, lane, b, z, m, n + 16u);
+    flush(sub, lane, b, z, m, n + FR);
     workgroupBarrier();
-    coopStoreT(c10, &block_c[mine], 16u);
+    coopStoreT(c10, &block_c[mine], FR);
     workgroupBarrier();
-    flush(sub, lane, b, z, m + 16u, n);
+    flush(sub, lane, b, z, m + FR, n);
     workgroupBarrier();
-    coopStoreT(c11, &block_c[mine], 16u);
+    coopStoreT(c11, &block_c[mine], FR);
     workgroupBarrier();
-    flush(sub, lane, b, z, m + 16u, n + 16u);
+    flush(sub, lane, b, z, m + FR, n + FR);
 }

@@ -425,7 +425,7 @@ fn measure(
         subgroups: gpu.subgroups,
         shader_f16: gpu.shader_f16,
         cooperative_matrices: gpu.cooperative_matrix_shapes(),
-        cooperative_f16: gpu.cooperative_f16,
+        cooperative_f16: gpu.cooperative.is_some(),
         width,
         height,
         views: views.len(),
