@@ -11,7 +11,7 @@
 # skipped and says so in RESULTS/session.txt, and every command's timeout is cut to what is
 # left. From DEV (default .device, made on the development machine: the stripped `cocog` and
 # `gemm-bench`, each possibly xz-compressed as NAME.xz; bench/ with sharp-dev and
-# defocus-dev/dev-table (gates also want dev-shelf; everything carried must stay under 64 MiB);
+# defocus-dev/dev-table and dev-shelf (no depth/ or baseline/; everything carried must stay under 64 MiB);
 # lpips/, the gsplat-1.5.3 wheel, tests.tar.xz of stripped GPU test executables from `cargo
 # test --no-run`):
 #   step            #12's step ratio: a 5000-iteration 3dgs run on dev-table at 100×75 gives the
@@ -36,6 +36,10 @@
 #   gates SET...    bench/gates.sh's quality runs at once (--jobs 12), interrupted where they would
 #                   outrun the budget; the same command again continues them (e.g. `gates
 #                   12-small 12-variants`; a phase word ends the list)
+# #12's full-size gate with F on tensor cores, once the step phase has shown them fast (an
+# estimate, not a measurement: about 14 ms a cocog step at 400×300 if F reaches 50 TFLOP/s):
+#   COCOG_F_CONV=coop COCOG_COOPERATIVE_MATRIX=1 BUDGET=540 bench/gpu-session.sh RESULTS gates 12-full
+# (the four trainings share the GPU; stopped ones continue on the next call with the same line).
 # gsplat's CUDA code builds on its first call on a machine (60–80 s on 16 cores); later calls on
 # the same warm machine reuse it. A phase that finished leaves a marker in WORK, so a second call
 # on the same machine goes on with the phases the first did not finish. RESULTS gets session.txt (every
