@@ -123,7 +123,8 @@ pub type ConvLayer = (u32, u32, u32, u32, u32);
 #[derive(Debug)]
 struct ConvKernels {
     forward: Gemm,
-    input_grad: Gemm,
+    /// None for the 5×5 layer: F reads detached renders, so nothing needs their gradient.
+    input_grad: Option<Gemm>,
     weight_grad: Gemm,
 }
 
@@ -244,18 +245,25 @@ fn problems(
 }
 
 impl ConvKernels {
-    /// With `cooperative`, on tensor cores where the context enabled them.
-    fn new(ctx: &GpuContext, problems: [Problem; 3], cooperative: bool) -> Self {
-        let [forward, input_grad, weight_grad] = problems.map(|p| {
+    /// With `cooperative`, on tensor cores where the context enabled them; the input
+    /// gradient only `with_input_grad`.
+    fn new(
+        ctx: &GpuContext,
+        problems: [Problem; 3],
+        cooperative: bool,
+        with_input_grad: bool,
+    ) -> Self {
+        let compile = |p: &Problem| {
             cooperative
                 .then(|| Gemm::cooperative(ctx, &p.label, &p.source, p.layout, p.scales))
                 .flatten()
                 .unwrap_or_else(|| Gemm::new(ctx, &p.label, &p.source, p.layout))
-        });
+        };
+        let [forward, input_grad, weight_grad] = &problems;
         Self {
-            forward,
-            input_grad,
-            weight_grad,
+            forward: compile(forward),
+            input_grad: with_input_grad.then(|| compile(input_grad)),
+            weight_grad: compile(weight_grad),
         }
     }
 }
@@ -271,16 +279,17 @@ impl ConvGemm {
         precision: MapPrecision,
         cooperative: bool,
     ) -> Self {
-        let kernels = |ks, cin, input| {
+        let kernels = |ks, cin, input, with_input_grad| {
             ConvKernels::new(
                 ctx,
                 problems(channels, ks, cin, precision, input),
                 cooperative,
+                with_input_grad,
             )
         };
         Self {
-            k3: kernels(3, channels, "map_t"),
-            k5: kernels(5, 3, "f32"),
+            k3: kernels(3, channels, "map_t", true),
+            k5: kernels(5, 3, "f32", false),
         }
     }
 
@@ -336,6 +345,8 @@ impl ConvGemm {
         );
         self.kernels(layer)
             .input_grad
+            .as_ref()
+            .expect("only the 3×3 layers' input gradients are compiled: F's input is detached")
             .encode(rec, ws, s, &[(2, params), (3, v_out), (4, v_in)]);
     }
 
