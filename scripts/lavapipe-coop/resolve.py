@@ -1,7 +1,7 @@
-"""Reads a Debian Packages index on stdin and prints the pool file of each named package and of
-everything it depends on (first alternative, virtual packages through Provides), skipping what
-only an installed system needs (dpkg, debconf and the like): scripts/lavapipe-coop/run unpacks
-them into a directory instead of installing them."""
+"""Reads a Debian Packages index on stdin and prints the pool file and SHA256 of each named
+package and of everything it depends on (first alternative, virtual packages through Provides),
+skipping what only an installed system needs (dpkg, debconf and the like):
+scripts/lavapipe-coop/run unpacks them into a directory instead of installing them."""
 
 import re
 import sys
@@ -24,7 +24,7 @@ def main():
         if not name or name in packages:
             continue
         packages[name] = (
-            field(stanza, "Filename"),
+            field(stanza, "Filename") + " " + field(stanza, "SHA256"),
             field(stanza, "Pre-Depends") + "," + field(stanza, "Depends"),
         )
         for p in field(stanza, "Provides").split(","):

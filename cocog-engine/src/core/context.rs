@@ -24,14 +24,17 @@ pub struct CoopFragments {
 
 impl CoopFragments {
     /// The largest square f16→f32 shape `offered` of 16 or 8, for adapters whose subgroups
-    /// have one width (the kernel lays four subgroups over a workgroup) of at most 64.
+    /// have one width (the kernel lays four subgroups over a workgroup) of 8 to 64. Narrower
+    /// ones are refused because lavapipe lists its shapes on 4-wide subgroups (CPUs without
+    /// AVX) while its feature bit says no, and wgpu 30 enables the feature from the list and
+    /// panics creating the device.
     pub fn choose(
         offered: &[wgpu::CooperativeMatrixProperties],
         subgroup_min: u32,
         subgroup_max: u32,
     ) -> Option<Self> {
         use wgpu::CooperativeScalarType::{F16, F32};
-        if subgroup_min != subgroup_max || !(1..=64).contains(&subgroup_min) {
+        if subgroup_min != subgroup_max || !(8..=64).contains(&subgroup_min) {
             return None;
         }
         [16, 8].into_iter().find_map(|side| {
@@ -367,6 +370,7 @@ mod tests {
         assert_eq!(got(&nvidia, 32, 32), frag(16, 32));
         assert_eq!(got(&lavapipe, 8, 8), frag(8, 8));
         assert_eq!(got(&lavapipe, 4, 8), None);
+        assert_eq!(got(&lavapipe, 4, 4), None);
         assert_eq!(got(&lavapipe, 128, 128), None);
         assert_eq!(got(&[shape(16, 16, 16, F16, F16)], 32, 32), None);
         assert_eq!(got(&[shape(16, 8, 16, F16, F32)], 32, 32), None);
