@@ -326,17 +326,22 @@ fn shapes(all: &[wgpu::CooperativeMatrixProperties]) -> String {
 
 #[cfg(test)]
 mod tests {
-    #[test]
-    fn cooperative_shapes_read_as_m_n_k_and_types() {
-        use wgpu::CooperativeScalarType::{F16, F32};
-        let shape = |m, n, k, ab, cr| wgpu::CooperativeMatrixProperties {
+    use wgpu::CooperativeScalarType as Scalar;
+
+    fn shape(m: u32, n: u32, k: u32, ab: Scalar, cr: Scalar) -> wgpu::CooperativeMatrixProperties {
+        wgpu::CooperativeMatrixProperties {
             m_size: m,
             n_size: n,
             k_size: k,
             ab_type: ab,
             cr_type: cr,
             saturating_accumulation: false,
-        };
+        }
+    }
+
+    #[test]
+    fn cooperative_shapes_read_as_m_n_k_and_types() {
+        use wgpu::CooperativeScalarType::{F16, F32};
         assert_eq!(super::shapes(&[]), "none");
         assert_eq!(
             super::shapes(&[shape(16, 8, 16, F16, F32), shape(8, 8, 8, F32, F32)]),
@@ -350,14 +355,6 @@ mod tests {
     fn cooperative_fragments_are_square_f16_to_f32_on_fixed_subgroups() {
         use super::CoopFragments;
         use wgpu::CooperativeScalarType::{F16, F32};
-        let shape = |m, n, k, ab, cr| wgpu::CooperativeMatrixProperties {
-            m_size: m,
-            n_size: n,
-            k_size: k,
-            ab_type: ab,
-            cr_type: cr,
-            saturating_accumulation: false,
-        };
         let nvidia = [
             shape(16, 8, 16, F16, F32),
             shape(16, 16, 16, F16, F16),
