@@ -3,9 +3,10 @@
 #
 #   bench/gpu-session.sh RESULTS [PHASE...]  (default: step peer-synthetic tests peer-train)
 #
-# The default fits a 15-minute lease in two calls: the first runs step, peer-synthetic (which
-# builds gsplat) and tests, whose 160 s fit beside them where peer-train's 450 s would not; the
-# second, on the warm machine, runs peer-train.
+# A 15-minute lease holds the machine's start and one call of about 540 s (BUDGET=540): step
+# (~165 s) with tests and peer-synthetic, or step with `TESTS=gpu_coop_gemm` tests; peer-train
+# (450 s) needs a call of its own, on a second lease. The default order is the first of these
+# followed by peer-train, which a second call on a still-warm machine would run.
 #
 # BUDGET (seconds, default 560) bounds the whole call: a phase that would not fit what is left is
 # skipped and says so in RESULTS/session.txt, and every command's timeout is cut to what is
@@ -20,10 +21,12 @@
 #                   implicit GEMMs and as tiled kernels (COCOG_F_CONV=tiled), and with F's maps
 #                   in f32 (COCOG_NO_F16=1) as well as f16, with the per-kernel split
 #                   (--kernels), and on tensor cores (COCOG_F_CONV=coop, f16 operands,
-#                   experimental); then, where DEV has gemm-bench (`cargo bench --bench gemm
+#                   experimental); the cocog step at 400×300 on the same Gaussians, F on the
+#                   f32 products and on tensor cores (what a step of #12's full-size gate
+#                   costs); then, where DEV has gemm-bench (`cargo bench --bench gemm
 #                   --no-run`, stripped), F's 3×3 layer as a plain GEMM at 100×75 and 400×300
 #                   on the f32 tiled product and on tensor cores (COCOG_COOPERATIVE_MATRIX=1)
-#                                                                                     ~125 s
+#                                                                                     ~165 s
 #   peer-synthetic  #11: `cocog bench --synthetic 1000000 --size 1920x1080` (and with --zoom 3,
 #                   most Gaussians culled, per kernel), then gsplat on the same Gaussians and
 #                   cameras (peer_gsplat.py workload)                             ~55 s + gsplat build
@@ -121,6 +124,14 @@ phase_step() {
             --resume "$model" --method "${m%%-*}" --iterations 100 --warmup 10 --kernels \
             >>"$log" 2>&1
     done
+    # The same Gaussians at full size (400×300): what a step of #12's full-size gate costs, on
+    # the f32 products and on tensor cores.
+    for m in gemm coop; do
+        echo "-- cocog step at 400×300 on the model's Gaussians, COCOG_F_CONV=$m" >>"$log"
+        bounded 60 env COCOG_F_CONV=$m COCOG_COOPERATIVE_MATRIX=$([[ $m == coop ]] && echo 1 || echo 0) \
+            "$cocog" bench "$work/in-dev-table" --downscale 1 --resume "$model" --method cocog \
+            --iterations 30 --warmup 5 >>"$log" 2>&1
+    done
     if [[ -x "$work/gemm-bench" ]]; then
         local px
         for px in 45056 720000; do
@@ -189,7 +200,7 @@ while ((i < ${#phases[@]})); do
     p="${phases[i]}"
     i=$((i + 1))
     case "$p" in
-        step) run_phase step 160 ;;
+        step) run_phase step 200 ;;
         peer-synthetic) run_phase peer-synthetic 165 ;;
         peer-train) run_phase peer-train 450 ;;
         idle-bench) run_phase idle-bench 120 ;;
