@@ -2,7 +2,8 @@
 //! plain GEMM (M = 64 output channels, K = 576 = 64 inputs × 9 taps, N = pixels of every render),
 //! on the f32 tiled product `Gemm` and, where the adapter has tensor cores and
 //! `COCOG_COOPERATIVE_MATRIX=1` enables them, the same product on cooperative matrices
-//! (`Gemm::cooperative`, f16 operands); their largest difference is printed beside the GFLOP/s.
+//! (`Gemm::cooperative`, f16 operands) in every block layout `COCOG_COOP_BLOCK` names; their
+//! largest difference from the f32 product is printed beside the GFLOP/s.
 //!
 //! `cargo bench -p cocog-engine --bench gemm`; COCOG_BENCH_PIXELS [45056: six renders at 100×75,
 //! rounded up to 64; 400×300 is 720000], COCOG_BENCH_ITERS [20]. COCOG_ADAPTER picks the adapter.
@@ -12,7 +13,8 @@ use std::time::Instant;
 mod common;
 
 use cocog_engine::{
-    Gemm, GemmLayout, GemmShape, GemmTile, GpuContext, OperandScales, Recorder, Workspace,
+    CoopBlock, Gemm, GemmLayout, GemmShape, GemmTile, GpuContext, OperandScales, Recorder,
+    Workspace,
 };
 use common::{env, noise};
 
@@ -83,28 +85,43 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     let reference: Vec<f32> = ctx.read(&gc, (M * n) as usize)?;
 
-    let Some(coop) = Gemm::cooperative(&ctx, "bench coop", problem, layout, OperandScales::NONE)
-    else {
+    let Some(fragments) = ctx.cooperative else {
         println!(
             "cooperative product:    not run (COCOG_COOPERATIVE_MATRIX=1 on an adapter with 16×16×16 or 8×8×8 f16→f32)"
         );
         return Ok(());
     };
-    let hc = ctx.storage("c coop", u64::from(M) * u64::from(n) * 4);
-    let tensor = time(&ctx, iters, |rec| {
-        coop.encode(rec, &mut ws, shape, &[(2, &ga), (3, &gb), (4, &hc)]);
-    });
-    let got: Vec<f32> = ctx.read(&hc, (M * n) as usize)?;
-    let worst = got
-        .iter()
-        .zip(&reference)
-        .map(|(g, r)| (g - r).abs())
-        .fold(0.0f32, f32::max);
-    println!(
-        "cooperative product:    {:8.3} ms  {:8.0} GFLOP/s  ({:.1}× the f32 product; largest difference {worst:.2e})",
-        1e3 * tensor,
-        flop / tensor / 1e9,
-        simt / tensor
-    );
+    // Every block layout, so one run on a GPU says which to make the default.
+    for (name, block) in CoopBlock::NAMED {
+        if !Gemm::fits(&ctx, block, fragments) {
+            println!("cooperative, block {name:5}: does not fit this adapter ({block:?})");
+            continue;
+        }
+        let coop = Gemm::cooperative_with(
+            &ctx,
+            "bench coop",
+            problem,
+            layout,
+            OperandScales::NONE,
+            block,
+        )
+        .expect("cooperative matrices enabled");
+        let hc = ctx.storage("c coop", u64::from(M) * u64::from(n) * 4);
+        let tensor = time(&ctx, iters, |rec| {
+            coop.encode(rec, &mut ws, shape, &[(2, &ga), (3, &gb), (4, &hc)]);
+        });
+        let got: Vec<f32> = ctx.read(&hc, (M * n) as usize)?;
+        let worst = got
+            .iter()
+            .zip(&reference)
+            .map(|(g, r)| (g - r).abs())
+            .fold(0.0f32, f32::max);
+        println!(
+            "cooperative, block {name:5}: {:8.3} ms  {:8.0} GFLOP/s  ({:.1}× the f32 product; largest difference {worst:.2e})",
+            1e3 * tensor,
+            flop / tensor / 1e9,
+            simt / tensor
+        );
+    }
     Ok(())
 }

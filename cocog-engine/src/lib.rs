@@ -54,8 +54,9 @@ pub use crate::core::{
 };
 pub use error::EngineError;
 pub use prims::{
-    Adam, AdamConfig, AdamMoments, AddInto, Gemm, GemmLayout, GemmShape, GemmTile, ImageLoss,
-    LossOutput, LossRows, LossValue, OperandScales, PrefixSum, RadixSort, SortBuffers, SortCount,
+    Adam, AdamConfig, AdamMoments, AddInto, CoopBlock, Gemm, GemmLayout, GemmShape, GemmTile,
+    ImageLoss, LossOutput, LossRows, LossValue, OperandScales, PrefixSum, RadixSort, SortBuffers,
+    SortCount,
 };
 pub use splat::{
     Batch, Crop, ForwardState, Frame, Gradients, ImageSpec, ParamBuffers, RenderedImage, Renderer,

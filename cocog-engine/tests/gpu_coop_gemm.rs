@@ -7,7 +7,7 @@
 mod common;
 
 use cocog_engine::{
-    CoopFragments, Gemm, GemmLayout, GemmShape, GemmTile, OperandScales, Workspace,
+    CoopBlock, CoopFragments, Gemm, GemmLayout, GemmShape, GemmTile, OperandScales, Workspace,
 };
 use common::{Rng, gpu};
 
@@ -51,8 +51,30 @@ fn skip_unless_refused(ctx: &cocog_engine::GpuContext) {
 #[test]
 fn cooperative_product_matches_f64_where_the_adapter_has_them() {
     let Some(ctx) = gpu() else { return };
-    // Sizes off the blocks (64 × 64 × 32 on 16-wide fragments, 32 × 32 × 16 on 8-wide), so
-    // edges are padded; split K sums 3 batches in parts.
+    let Some(fragments) = ctx.cooperative else {
+        skip_unless_refused(ctx);
+        return;
+    };
+    let mut ran = 0;
+    for (name, block) in CoopBlock::NAMED {
+        if !Gemm::fits(ctx, block, fragments) {
+            eprintln!(
+                "block {name}: {block:?} does not fit {}",
+                ctx.adapter_name()
+            );
+            continue;
+        }
+        product_matches_f64(ctx, name, block);
+        ran += 1;
+    }
+    // The first layout is the default and must run everywhere.
+    assert!(ran > 0 && Gemm::fits(ctx, CoopBlock::SQUARE, fragments));
+}
+
+/// One block layout on plain matrices. Sizes off every block (64 × 64 × 32 on 16-wide
+/// fragments, 32 × 32 × 16 on 8-wide, and the wider ones), so edges are padded; split K sums 3
+/// batches in parts.
+fn product_matches_f64(ctx: &cocog_engine::GpuContext, name: &str, block: CoopBlock) {
     for (split_k, (m, n, k, batches)) in [(false, (70, 130, 45, 2)), (true, (20, 33, 700, 3))] {
         let layout = GemmLayout {
             a_k_fast: true,
@@ -61,10 +83,8 @@ fn cooperative_product_matches_f64_where_the_adapter_has_them() {
             tile: GemmTile::SQUARE,
         };
         let scales = OperandScales { a: 4.0, b: 0.5 };
-        let Some(gemm) = Gemm::cooperative(ctx, "coop test", PLAIN, layout, scales) else {
-            skip_unless_refused(ctx);
-            return;
-        };
+        let gemm = Gemm::cooperative_with(ctx, "coop test", PLAIN, layout, scales, block)
+            .expect("cooperative matrices enabled");
         let mut rng = Rng::new(7);
         // f16-representable inputs, so the f64 product sees what the tensor cores multiply.
         let mut half = |len: usize| -> Vec<f32> {
@@ -108,7 +128,7 @@ fn cooperative_product_matches_f64_where_the_adapter_has_them() {
                     let tol = 1e-5 * mag + 1e-6;
                     assert!(
                         (g - want).abs() <= tol,
-                        "split {split_k}: C[{o}][{i}][{j}] = {g}, want {want} (±{tol})"
+                        "block {name}, split {split_k}: C[{o}][{i}][{j}] = {g}, want {want} (±{tol})"
                     );
                 }
             }

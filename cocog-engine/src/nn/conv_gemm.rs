@@ -405,25 +405,27 @@ mod tests {
         ] {
             for (ks, cin, input) in [(3, 64, "map_t"), (5, 3, "f32")] {
                 for p in problems(64, ks, cin, precision, input) {
-                    // As `shader` hands it to wgpu: enables first.
-                    let source = crate::core::hoist_enables(&Gemm::cooperative_source(
-                        &p.source, p.layout, p.scales, fragments,
-                    ));
-                    let module = naga::front::wgsl::parse_str(&source).unwrap_or_else(|e| {
-                        panic!("{} ({precision:?}): {}", p.label, e.emit_to_string(&source))
-                    });
-                    let info = naga::valid::Validator::new(
-                        naga::valid::ValidationFlags::all(),
-                        naga::valid::Capabilities::all(),
-                    )
-                    .validate(&module)
-                    .unwrap_or_else(|e| panic!("{} ({precision:?}): {e:?}", p.label));
-                    let options = naga::back::spv::Options {
-                        lang_version: (1, 5),
-                        ..Default::default()
-                    };
-                    naga::back::spv::write_vec(&module, &info, &options, None)
-                        .unwrap_or_else(|e| panic!("{} ({precision:?}): {e}", p.label));
+                    for (name, block) in crate::CoopBlock::NAMED {
+                        let what = format!("{} ({precision:?}, block {name})", p.label);
+                        // As `shader` hands it to wgpu: enables first.
+                        let source = crate::core::hoist_enables(&Gemm::cooperative_source(
+                            &p.source, p.layout, p.scales, fragments, block,
+                        ));
+                        let module = naga::front::wgsl::parse_str(&source)
+                            .unwrap_or_else(|e| panic!("{what}: {}", e.emit_to_string(&source)));
+                        let info = naga::valid::Validator::new(
+                            naga::valid::ValidationFlags::all(),
+                            naga::valid::Capabilities::all(),
+                        )
+                        .validate(&module)
+                        .unwrap_or_else(|e| panic!("{what}: {e:?}"));
+                        let options = naga::back::spv::Options {
+                            lang_version: (1, 5),
+                            ..Default::default()
+                        };
+                        naga::back::spv::write_vec(&module, &info, &options, None)
+                            .unwrap_or_else(|e| panic!("{what}: {e}"));
+                    }
                 }
             }
         }

@@ -124,9 +124,8 @@ pub struct Gemm {
     layout: GemmLayout,
     tile: Kernel,
     reduce: Option<Kernel>,
-    /// The tile kernel is gemm_coop.wgsl's, on these fragments (blocks of 4 × 4 fragments,
-    /// slices 2 deep).
-    cooperative: Option<CoopFragments>,
+    /// The tile kernel is gemm_coop.wgsl's, on these fragments in this layout.
+    cooperative: Option<(CoopFragments, CoopBlock)>,
 }
 
 /// Powers of two that scale A and B before gemm_coop.wgsl rounds them to f16 (undone on C), so
@@ -139,6 +138,111 @@ pub struct OperandScales {
 
 impl OperandScales {
     pub const NONE: Self = Self { a: 1.0, b: 1.0 };
+}
+
+/// How gemm_coop.wgsl lays a block of C over a workgroup: `subgroups` (along M, along N), each
+/// accumulating `fragments` (along M, along N), from staged slices `depth` fragments deep.
+/// Bigger blocks share each staged slice among more products; more fragments per subgroup give
+/// the tensor cores more work per load. Which is fastest is the GPU's to say (`cargo bench
+/// --bench gemm` times every named layout), so the default stays the first one until a device
+/// has measured them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CoopBlock {
+    pub subgroups: (u32, u32),
+    pub fragments: (u32, u32),
+    pub depth: u32,
+}
+
+impl CoopBlock {
+    /// 4 × 4 fragments from four subgroups of 2 × 2, slices 2 deep (64 × 64 × 32 on NVIDIA).
+    pub const SQUARE: Self = Self::new((2, 2), (2, 2), 2);
+
+    /// The layouts `COCOG_COOP_BLOCK` names, as fragments of C per block (rows × columns; F's
+    /// products all have M = 64, 4 fragments on NVIDIA) and, after `k`, the slice's depth.
+    pub const NAMED: [(&'static str, Self); 5] = [
+        ("4x4", Self::SQUARE),
+        ("4x8", Self::new((1, 4), (4, 2), 2)),
+        ("4x16", Self::new((1, 4), (4, 4), 2)),
+        ("4x8k4", Self::new((1, 4), (4, 2), 4)),
+        ("8x8", Self::new((2, 4), (4, 2), 2)),
+    ];
+
+    pub const fn new(subgroups: (u32, u32), fragments: (u32, u32), depth: u32) -> Self {
+        Self {
+            subgroups,
+            fragments,
+            depth,
+        }
+    }
+
+    pub fn named(name: &str) -> Option<Self> {
+        Self::NAMED
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, b)| *b)
+    }
+
+    /// `COCOG_COOP_BLOCK`'s layout (unset: `SQUARE`); an unknown name is refused with the
+    /// names there are.
+    pub fn from_env() -> Result<Self, String> {
+        match std::env::var("COCOG_COOP_BLOCK") {
+            Err(_) => Ok(Self::SQUARE),
+            Ok(name) => Self::named(&name).ok_or_else(|| {
+                let names: Vec<&str> = Self::NAMED.iter().map(|(n, _)| *n).collect();
+                format!(
+                    "COCOG_COOP_BLOCK={name}: expected one of {}",
+                    names.join(", ")
+                )
+            }),
+        }
+    }
+
+    /// Rows, columns and depth of the block in elements, on fragments of side `fr`.
+    pub fn dims(self, fr: u32) -> (u32, u32, u32) {
+        (
+            self.subgroups.0 * self.fragments.0 * fr,
+            self.subgroups.1 * self.fragments.1 * fr,
+            self.depth * fr,
+        )
+    }
+
+    /// Invocations of a workgroup and bytes of its workgroup memory, on `f`.
+    pub fn footprint(self, f: CoopFragments) -> (u32, u32) {
+        let (bm, bn, bk) = self.dims(f.side);
+        let subgroups = self.subgroups.0 * self.subgroups.1;
+        let bytes = 2 * (bm * bk + bk * bn) + 4 * subgroups * f.side * f.side;
+        (subgroups * f.subgroup, bytes)
+    }
+
+    /// The accumulators' lines gemm_coop.wgsl leaves to the host: declarations, the products
+    /// of one fragment of K, and the stores through `flush`.
+    fn lines(self) -> [String; 3] {
+        let (wm, wn) = self.fragments;
+        let (mut acc, mut products, mut stores) = (String::new(), String::new(), String::new());
+        for i in 0..wm {
+            products += &format!(
+                "            let a{i} = coopLoadT<coop_mat16x16<f16, A>>(&slice_a[(sm + {i}u * FR) * BK + kk], BK);\n"
+            );
+        }
+        for j in 0..wn {
+            products += &format!(
+                "            let b{j} = coopLoadT<coop_mat16x16<f16, B>>(&slice_b[kk * BN + sn + {j}u * FR], BN);\n"
+            );
+        }
+        for i in 0..wm {
+            for j in 0..wn {
+                acc += &format!("    var c{i}_{j} = coop_mat16x16<f32, C>();\n");
+                products +=
+                    &format!("            c{i}_{j} = coopMultiplyAdd(a{i}, b{j}, c{i}_{j});\n");
+                // block_c is each subgroup's for one fragment at a time.
+                stores += &format!(
+                    "    workgroupBarrier();\n    coopStoreT(c{i}_{j}, &block_c[mine], FR);\n    \
+                     workgroupBarrier();\n    flush(sub, lane, b, z, m + {i}u * FR, n + {j}u * FR);\n"
+                );
+            }
+        }
+        [acc, products, stores]
+    }
 }
 
 /// Split-K partial products, declared for the problem (no-ops without a split).
@@ -181,7 +285,9 @@ impl Gemm {
 
     /// `new`'s product on cooperative matrices (gemm_coop.wgsl: f16 operands scaled by
     /// `scales`, f32 sums), where the context enabled them (`GpuContext::cooperative`);
-    /// `None` elsewhere. `layout.tile` is ignored: blocks are 4 × 4 fragments.
+    /// `None` elsewhere. `layout.tile` is ignored: blocks are `COCOG_COOP_BLOCK`'s layout
+    /// (`CoopBlock::from_env`), or `CoopBlock::SQUARE` where that is unknown or does not fit the
+    /// device (said on stderr: the switch is experimental).
     pub fn cooperative(
         ctx: &GpuContext,
         label: &str,
@@ -190,7 +296,44 @@ impl Gemm {
         scales: OperandScales,
     ) -> Option<Self> {
         let fragments = ctx.cooperative?;
-        let source = Self::cooperative_source(problem, layout, scales, fragments);
+        let block = match CoopBlock::from_env() {
+            Ok(b) if Self::fits(ctx, b, fragments) => b,
+            Ok(b) => {
+                eprintln!(
+                    "COCOG_COOP_BLOCK: {b:?} needs {:?} (invocations, bytes of workgroup memory), more than {} allows; using {:?}",
+                    b.footprint(fragments),
+                    ctx.adapter_name(),
+                    CoopBlock::SQUARE
+                );
+                CoopBlock::SQUARE
+            }
+            Err(e) => {
+                eprintln!("{e}; using {:?}", CoopBlock::SQUARE);
+                CoopBlock::SQUARE
+            }
+        };
+        Self::cooperative_with(ctx, label, problem, layout, scales, block)
+    }
+
+    /// Whether `block` on `fragments` fits the device's workgroup limits.
+    pub fn fits(ctx: &GpuContext, block: CoopBlock, fragments: CoopFragments) -> bool {
+        let limits = ctx.device.limits();
+        let (invocations, bytes) = block.footprint(fragments);
+        invocations <= limits.max_compute_invocations_per_workgroup
+            && bytes <= limits.max_compute_workgroup_storage_size
+    }
+
+    /// `cooperative` in a given layout, which must fit (`fits`).
+    pub fn cooperative_with(
+        ctx: &GpuContext,
+        label: &str,
+        problem: &str,
+        layout: GemmLayout,
+        scales: OperandScales,
+        block: CoopBlock,
+    ) -> Option<Self> {
+        let fragments = ctx.cooperative?;
+        let source = Self::cooperative_source(problem, layout, scales, fragments, block);
         let module = shader(ctx, label, &source);
         // The split-K sum is gemm.wgsl's, over the same partials.
         let reduce = layout.split_k.then(|| {
@@ -201,7 +344,7 @@ impl Gemm {
             layout,
             tile: Kernel::labelled(ctx, &module, "gemm_tile", &format!("{label} (coop)")),
             reduce,
-            cooperative: Some(fragments),
+            cooperative: Some((fragments, block)),
         })
     }
 
@@ -211,24 +354,34 @@ impl Gemm {
         layout: GemmLayout,
         scales: OperandScales,
         fragments: CoopFragments,
+        block: CoopBlock,
     ) -> String {
         let side = fragments.side;
+        let [acc, products, stores] = block.lines();
         let body = concat!(
             include_str!("gemm_common.wgsl"),
             include_str!("gemm_coop.wgsl")
         )
+        .replace("    // ACCUMULATORS\n", &acc)
+        .replace("            // PRODUCTS\n", &products)
+        .replace("    // STORES\n", &stores)
         .replace("coop_mat16x16", &format!("coop_mat{side}x{side}"));
+        let (gm, gn) = block.subgroups;
+        let (wm, wn) = block.fragments;
         format!(
             "enable f16;\nenable wgpu_cooperative_matrix;\n\
              const A_K_FAST: bool = {};\nconst B_K_FAST: bool = {};\nconst SPLIT: bool = {};\n\
              const SCALE_A: f32 = {:?};\nconst SCALE_B: f32 = {:?};\n\
-             const FR: u32 = {side}u;\nconst SG: u32 = {}u;\n{body}\n{problem}\n{}",
+             const FR: u32 = {side}u;\nconst SG: u32 = {}u;\n\
+             const GM: u32 = {gm}u;\nconst GN: u32 = {gn}u;\nconst WM: u32 = {wm}u;\n\
+             const WN: u32 = {wn}u;\nconst KF: u32 = {}u;\n{body}\n{problem}\n{}",
             layout.a_k_fast,
             layout.b_k_fast,
             layout.split_k,
             scales.a,
             scales.b,
             fragments.subgroup,
+            block.depth,
             partials_source(layout.split_k),
         )
     }
@@ -236,7 +389,7 @@ impl Gemm {
     /// Rows, columns and depth of a block of C.
     fn block(&self) -> (u32, u32, u32) {
         match self.cooperative {
-            Some(f) => (4 * f.side, 4 * f.side, 2 * f.side),
+            Some((f, block)) => block.dims(f.side),
             None => self.layout.tile.dims(),
         }
     }

@@ -2,25 +2,27 @@
 // load_b, epilogue, store_partial, load_partial, A_K_FAST, B_K_FAST, SPLIT) and the same grid.
 // The prelude also sets FR, the side of the adapter's square f16→f32 fragments (16 on NVIDIA,
 // 8 on lavapipe; the type name coop_mat16x16 is rewritten to match), and SG, its fixed
-// subgroup width. A workgroup is four subgroups, taken to hold consecutive invocations (true on
-// NVIDIA and lavapipe; Vulkan does not promise it), each accumulating a 2FR × 2FR quarter of a
-// 4FR × 4FR block of C in f32, from 2FR-deep slices staged in f16. SCALE_A and SCALE_B, also the
+// subgroup width, and the block's layout (gemm.rs's CoopBlock): GM × GN subgroups, taken to hold
+// consecutive invocations (true on NVIDIA and lavapipe; Vulkan does not promise it), each
+// accumulating WM × WN fragments of C in f32, from slices KF fragments deep staged in f16. The
+// host writes the accumulators' lines (named c_i_j: naga has no arrays of cooperative
+// matrices) at the three marked places. SCALE_A and SCALE_B, also the
 // prelude's, are powers of two applied before the f16 rounding and undone after: a gradient
 // spread over every pixel lies below f16's normal range (6.1e-5) and would lose its digits or
 // flush to zero. Under the Vulkan memory model, which cooperative matrices bring, naga 30's
 // plain workgroup accesses are not formally ordered by barriers across invocations; drivers
 // order them in practice, and the tests compare this product with the f32 one.
 
-const WG: u32 = 4u * SG;
-const BM: u32 = 4u * FR;
-const BN: u32 = 4u * FR;
-const BK: u32 = 2u * FR;
+const WG: u32 = GM * GN * SG;
+const BM: u32 = GM * WM * FR;
+const BN: u32 = GN * WN * FR;
+const BK: u32 = KF * FR;
 const FRAG: u32 = FR * FR;
 
 // [BM][BK] and [BK][BN]; then each subgroup's fragment of C on its way to `finish`.
 var<workgroup> slice_a: array<f16, BM * BK>;
 var<workgroup> slice_b: array<f16, BK * BN>;
-var<workgroup> block_c: array<f32, 4u * FRAG>;
+var<workgroup> block_c: array<f32, GM * GN * FRAG>;
 
 // Subgroup `sub`'s fragment at (m, n), just stored in block_c, through `finish`.
 fn flush(sub: u32, lane: u32, b: u32, z: u32, m: u32, n: u32) {
@@ -52,12 +54,9 @@ fn gemm_tile(
     let k_end = blk.k_end;
     let sub = lid / SG;
     let lane = lid % SG;
-    let sm = (sub / 2u) * 2u * FR;
-    let sn = (sub % 2u) * 2u * FR;
-    var c00 = coop_mat16x16<f32, C>();
-    var c01 = coop_mat16x16<f32, C>();
-    var c10 = coop_mat16x16<f32, C>();
-    var c11 = coop_mat16x16<f32, C>();
+    let sm = (sub / GN) * WM * FR;
+    let sn = (sub % GN) * WN * FR;
+    // ACCUMULATORS
     for (var kb = k_begin; kb < k_end; kb += BK) {
         for (var e = lid; e < BM * BK; e += WG) {
             var mm = e % BM;
@@ -89,14 +88,7 @@ fn gemm_tile(
         }
         workgroupBarrier();
         for (var kk = 0u; kk < BK; kk += FR) {
-            let a0 = coopLoadT<coop_mat16x16<f16, A>>(&slice_a[sm * BK + kk], BK);
-            let a1 = coopLoadT<coop_mat16x16<f16, A>>(&slice_a[(sm + FR) * BK + kk], BK);
-            let b0 = coopLoadT<coop_mat16x16<f16, B>>(&slice_b[kk * BN + sn], BN);
-            let b1 = coopLoadT<coop_mat16x16<f16, B>>(&slice_b[kk * BN + sn + FR], BN);
-            c00 = coopMultiplyAdd(a0, b0, c00);
-            c01 = coopMultiplyAdd(a0, b1, c01);
-            c10 = coopMultiplyAdd(a1, b0, c10);
-            c11 = coopMultiplyAdd(a1, b1, c11);
+            // PRODUCTS
         }
         workgroupBarrier();
     }
@@ -104,19 +96,5 @@ fn gemm_tile(
     let mine = sub * FRAG;
     let m = m0 + sm;
     let n = n0 + sn;
-    coopStoreT(c00, &block_c[mine], FR);
-    workgroupBarrier();
-    flush(sub, lane, b, z, m, n);
-    workgroupBarrier();
-    coopStoreT(c01, &block_c[mine], FR);
-    workgroupBarrier();
-    flush(sub, lane, b, z, m, n + FR);
-    workgroupBarrier();
-    coopStoreT(c10, &block_c[mine], FR);
-    workgroupBarrier();
-    flush(sub, lane, b, z, m + FR, n);
-    workgroupBarrier();
-    coopStoreT(c11, &block_c[mine], FR);
-    workgroupBarrier();
-    flush(sub, lane, b, z, m + FR, n + FR);
+    // STORES
 }

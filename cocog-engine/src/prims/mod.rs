@@ -11,7 +11,7 @@ mod sort;
 
 pub use adam::{Adam, AdamConfig, AdamMoments};
 pub use add::AddInto;
-pub use gemm::{Gemm, GemmLayout, GemmShape, GemmTile, OperandScales};
+pub use gemm::{CoopBlock, Gemm, GemmLayout, GemmShape, GemmTile, OperandScales};
 pub use loss::{ImageLoss, LossOutput, LossRows, LossValue};
 pub use scan::PrefixSum;
 pub use sort::{RadixSort, SortBuffers, SortCount};
