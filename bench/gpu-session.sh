@@ -3,10 +3,11 @@
 #
 #   bench/gpu-session.sh RESULTS [PHASE...]  (default: step peer-synthetic tests peer-train)
 #
-# A 15-minute lease holds the machine's start and one call of about 540 s (BUDGET=540): step
-# (~165 s) with tests and peer-synthetic, or step with `TESTS=gpu_coop_gemm` tests; peer-train
-# (450 s) needs a call of its own, on a second lease. The default order is the first of these
-# followed by peer-train, which a second call on a still-warm machine would run.
+# A 15-minute lease holds the machine's start (about 40 s on 2026-11-27) and about 800 s of
+# calls; a machine left idle for 30 s is gone. Measured on an H200 (2026-11-27): step 45 s,
+# peer-synthetic 85 s (65 of them gsplat's CUDA build), tests 55 s, peer-train 250 s with gsplat
+# built: the default phases fit one call of BUDGET=540, which leaves time for a second call
+# (e.g. `gates`) only if it is made at once.
 #
 # BUDGET (seconds, default 560) bounds the whole call: a phase that would not fit what is left is
 # skipped and says so in RESULTS/session.txt, and every command's timeout is cut to what is
@@ -21,20 +22,21 @@
 #                   implicit GEMMs and as tiled kernels (COCOG_F_CONV=tiled), and with F's maps
 #                   in f32 (COCOG_NO_F16=1) as well as f16, with the per-kernel split
 #                   (--kernels), and on tensor cores (COCOG_F_CONV=coop, f16 operands,
-#                   experimental); the cocog step at 400×300 on the same Gaussians, F on the
-#                   f32 products and on tensor cores (what a step of #12's full-size gate
-#                   costs); then, where DEV has gemm-bench (`cargo bench --bench gemm
-#                   --no-run`, stripped), F's 3×3 layer as a plain GEMM at 100×75 and 400×300
-#                   on the f32 tiled product and on tensor cores (COCOG_COOPERATIVE_MATRIX=1)
-#                                                                                     ~165 s
+#                   experimental); the 3dgs step and the cocog step at 400×300 on the same
+#                   Gaussians, F on the f32 products and on tensor cores in every block layout
+#                   (COCOG_COOP_BLOCK; what a step of #12's full-size gate costs); then, where
+#                   DEV has gemm-bench (`cargo bench --bench gemm --no-run`, stripped), F's 3×3
+#                   layer as a plain GEMM at 100×75 and 400×300 on the f32 tiled product and on
+#                   tensor cores in every layout (COCOG_COOPERATIVE_MATRIX=1)
+#                                                        ~65 s on an H200 (45 s before layouts)
 #   peer-synthetic  #11: `cocog bench --synthetic 1000000 --size 1920x1080` (and with --zoom 3,
 #                   most Gaussians culled, per kernel), then gsplat on the same Gaussians and
-#                   cameras (peer_gsplat.py workload)                             ~55 s + gsplat build
+#                   cameras (peer_gsplat.py workload)                             ~20 s + gsplat build (65 s)
 #   peer-train      #11: sharp-dev at 400×300, 30000 iterations: `cocog train --method 3dgs`
 #                   (timed without evaluations or checkpoints) and `cocog eval`, then gsplat on
-#                   the same views (peer_gsplat.py train)                          ~350 s + gsplat build
+#                   the same views (peer_gsplat.py train)                          ~250 s + gsplat build
 #   idle-bench      `cocog bench` rows of sharp-dev at 100×75 and 1M random Gaussians at 1080p
-#   tests           the GPU test executables (f64 references, finite differences)      ~150 s
+#   tests           the GPU test executables (f64 references, finite differences)      ~55 s
 #                   (TESTS="NAME ..." runs only those; gpu_coop_gemm alone takes seconds)
 #   gates SET...    bench/gates.sh's quality runs at once (--jobs 12), interrupted where they would
 #                   outrun the budget; the same command again continues them (e.g. `gates
@@ -124,11 +126,16 @@ phase_step() {
             --resume "$model" --method "${m%%-*}" --iterations 100 --warmup 10 --kernels \
             >>"$log" 2>&1
     done
-    # The same Gaussians at full size (400×300): what a step of #12's full-size gate costs, on
-    # the f32 products and on tensor cores.
-    for m in gemm coop; do
-        echo "-- cocog step at 400×300 on the model's Gaussians, COCOG_F_CONV=$m" >>"$log"
-        bounded 60 env COCOG_F_CONV=$m COCOG_COOPERATIVE_MATRIX=$([[ $m == coop ]] && echo 1 || echo 0) \
+    # The same Gaussians at full size (400×300): what a step of #12's full-size gate costs,
+    # against the 3dgs step there, on the f32 products and on tensor cores in every block
+    # layout (CoopBlock).
+    echo "-- 3dgs step at 400×300 on the model's Gaussians" >>"$log"
+    bounded 60 "$cocog" bench "$work/in-dev-table" --downscale 1 --resume "$model" \
+        --method 3dgs --iterations 100 --warmup 10 >>"$log" 2>&1
+    for m in gemm coop:4x4 coop:4x8 coop:4x16 coop:4x8k4 coop:8x8; do
+        echo "-- cocog step at 400×300 on the model's Gaussians, COCOG_F_CONV=${m%%:*} block ${m#*:}" >>"$log"
+        bounded 60 env COCOG_F_CONV=${m%%:*} COCOG_COOP_BLOCK=${m#*:} \
+            COCOG_COOPERATIVE_MATRIX=$([[ $m == coop* ]] && echo 1 || echo 0) \
             "$cocog" bench "$work/in-dev-table" --downscale 1 --resume "$model" --method cocog \
             --iterations 30 --warmup 5 >>"$log" 2>&1
     done
@@ -200,11 +207,11 @@ while ((i < ${#phases[@]})); do
     p="${phases[i]}"
     i=$((i + 1))
     case "$p" in
-        step) run_phase step 200 ;;
+        step) run_phase step 120 ;;
         peer-synthetic) run_phase peer-synthetic 165 ;;
-        peer-train) run_phase peer-train 450 ;;
+        peer-train) run_phase peer-train 330 ;;
         idle-bench) run_phase idle-bench 120 ;;
-        tests) run_phase tests 160 ;;
+        tests) run_phase tests 90 ;;
         gates)
             sets=()
             while ((i < ${#phases[@]})) && [[ "${phases[i]}" == [0-9]* ]]; do
