@@ -141,9 +141,11 @@ impl OperandScales {
 }
 
 /// How gemm_coop.wgsl lays a block of C over a workgroup: `subgroups` (along M, along N), each
-/// accumulating `fragments` (along M, along N), from staged slices `depth` fragments deep.
-/// Bigger blocks share each staged slice among more products; more fragments per subgroup give
-/// the tensor cores more work per load. Which is fastest is the GPU's to say (`cargo bench
+/// accumulating `fragments` (along M, along N), from staged slices `depth` fragments deep;
+/// with `prefetch`, each invocation loads its share of the next slice into registers before
+/// the current slice's products, so the loads' latency overlaps them. Bigger blocks share each
+/// staged slice among more products; more fragments per subgroup give the tensor cores more
+/// work per load. Which is fastest is the GPU's to say (`cargo bench
 /// --bench gemm` times every named layout), so the default stays the first one until a device
 /// has measured them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -151,6 +153,7 @@ pub struct CoopBlock {
     pub subgroups: (u32, u32),
     pub fragments: (u32, u32),
     pub depth: u32,
+    pub prefetch: bool,
 }
 
 impl CoopBlock {
@@ -158,13 +161,16 @@ impl CoopBlock {
     pub const SQUARE: Self = Self::new((2, 2), (2, 2), 2);
 
     /// The layouts `COCOG_COOP_BLOCK` names, as fragments of C per block (rows × columns; F's
-    /// products all have M = 64, 4 fragments on NVIDIA) and, after `k`, the slice's depth.
-    pub const NAMED: [(&'static str, Self); 5] = [
+    /// products all have M = 64, 4 fragments on NVIDIA), after `k` the slice's depth, and `p`
+    /// for prefetching.
+    pub const NAMED: [(&'static str, Self); 7] = [
         ("4x4", Self::SQUARE),
         ("4x8", Self::new((1, 4), (4, 2), 2)),
         ("4x16", Self::new((1, 4), (4, 4), 2)),
         ("4x8k4", Self::new((1, 4), (4, 2), 4)),
         ("8x8", Self::new((2, 4), (4, 2), 2)),
+        ("4x4p", Self::SQUARE.prefetching()),
+        ("4x8p", Self::new((1, 4), (4, 2), 2).prefetching()),
     ];
 
     pub const fn new(subgroups: (u32, u32), fragments: (u32, u32), depth: u32) -> Self {
@@ -172,6 +178,14 @@ impl CoopBlock {
             subgroups,
             fragments,
             depth,
+            prefetch: false,
+        }
+    }
+
+    pub const fn prefetching(self) -> Self {
+        Self {
+            prefetch: true,
+            ..self
         }
     }
 
@@ -374,7 +388,8 @@ impl Gemm {
              const SCALE_A: f32 = {:?};\nconst SCALE_B: f32 = {:?};\n\
              const FR: u32 = {side}u;\nconst SG: u32 = {}u;\n\
              const GM: u32 = {gm}u;\nconst GN: u32 = {gn}u;\nconst WM: u32 = {wm}u;\n\
-             const WN: u32 = {wn}u;\nconst KF: u32 = {}u;\n{body}\n{problem}\n{}",
+             const WN: u32 = {wn}u;\nconst KF: u32 = {}u;\nconst PREFETCH: bool = {};\n\
+             {body}\n{problem}\n{}",
             layout.a_k_fast,
             layout.b_k_fast,
             layout.split_k,
@@ -382,6 +397,7 @@ impl Gemm {
             scales.b,
             fragments.subgroup,
             block.depth,
+            block.prefetch,
             partials_source(layout.split_k),
         )
     }
