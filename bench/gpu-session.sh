@@ -132,7 +132,7 @@ phase_step() {
     echo "-- 3dgs step at 400×300 on the model's Gaussians" >>"$log"
     bounded 60 "$cocog" bench "$work/in-dev-table" --downscale 1 --resume "$model" \
         --method 3dgs --iterations 100 --warmup 10 >>"$log" 2>&1
-    for m in gemm coop:4x4 coop:4x8 coop:4x16 coop:4x8k4 coop:8x8; do
+    for m in gemm coop:4x4 coop:4x8 coop:4x16 coop:4x8k4 coop:8x8 coop:4x4p coop:4x8p; do
         echo "-- cocog step at 400×300 on the model's Gaussians, COCOG_F_CONV=${m%%:*} block ${m#*:}" >>"$log"
         bounded 60 env COCOG_F_CONV=${m%%:*} COCOG_COOP_BLOCK=${m#*:} \
             COCOG_COOPERATIVE_MATRIX=$([[ $m == coop* ]] && echo 1 || echo 0) \
