@@ -11,7 +11,7 @@
 #
 # BUDGET (seconds, default 560) bounds the whole call: a phase that would not fit what is left is
 # skipped and says so in RESULTS/session.txt, and every command's timeout is cut to what is
-# left. From DEV (default .device, made on the development machine: the stripped `cocog` and
+# left. From DEV (default .device, made on the development machine by bench/device-kit.sh: the stripped `cocog` and
 # `gemm-bench`, each possibly xz-compressed as NAME.xz; bench/ with sharp-dev and
 # defocus-dev/dev-table and dev-shelf (no depth/ or baseline/; everything carried must stay under 64 MiB);
 # lpips/, the gsplat-1.5.3 wheel, tests.tar.xz of stripped GPU test executables from `cargo

@@ -1,0 +1,73 @@
+#!/usr/bin/env bash
+# Builds what bench/gpu-session.sh carries to a lent GPU machine (../shared/notes/gpu-device.md),
+# in the git-ignored .gl/ and .device/ of the project root:
+#   .gl/                 the Vulkan loader and GL dispatch packages the machine lacks (amd64 .debs)
+#   .device/cocog.xz     the release `cocog`, stripped
+#   .device/gemm-bench.xz  `cargo bench --bench gemm --no-run`, stripped
+#   .device/tests.tar.xz the GPU test executables of the engine and the trainer, stripped
+#   .device/bench/       sharp-dev, defocus-dev/dev-table and dev-shelf from ../shared/bench,
+#                        without depth/ and baseline/
+#   .device/lpips/       the LPIPS-Alex weights (scripts/lpips/fetch-weights.sh; VGG left out)
+#   .device/gsplat-1.5.3-py3-none-any.whl  the peer, for bench/peer_gsplat.py
+#
+#   bench/device-kit.sh [SHARED]   (SHARED defaults to ../shared)
+#
+# The run tool carries at most 64 MiB with the working tree; this prints the total and fails
+# past it. Takes about 10 minutes on 2 cores from a clean target/.
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$root"
+shared="${1:-$root/../shared}"
+[[ -d "$shared/bench/sharp-dev" ]] || { echo "device-kit: no $shared/bench/sharp-dev" >&2; exit 1; }
+for p in /.gl/ /.device/; do
+    grep -qxF "$p" .git/info/exclude 2>/dev/null || echo "$p" >>.git/info/exclude
+done
+
+if ! ls .gl/libvulkan1_*.deb >/dev/null 2>&1; then
+    mkdir -p .gl /tmp/device-kit-apt/partial
+    o=(-oAPT::Architecture=amd64 -oAPT::Architectures=amd64 -oDir::State::Lists=/tmp/device-kit-apt)
+    apt-get "${o[@]}" update -qq
+    (cd .gl && apt-get "${o[@]}" download libvulkan1 libegl1 libglvnd0 libopengl0 libgl1 libglx0 libgles2)
+fi
+
+mkdir -p .device
+cargo build --release -p cocog-cli
+strip -o /tmp/device-kit-cocog target/release/cocog
+xz -T0 -6 -c /tmp/device-kit-cocog >.device/cocog.xz
+
+# The newest executable of a cargo target in a deps folder.
+newest() { ls -t "$1"/"$2"-* 2>/dev/null | grep -v '\.d$' | head -1; }
+cargo bench -p cocog-engine --bench gemm --no-run
+strip -o /tmp/device-kit-gemm "$(newest target/release/deps gemm)"
+xz -T0 -c /tmp/device-kit-gemm >.device/gemm-bench.xz
+
+cargo test -p cocog-engine -p cocog-train --no-run
+rm -rf /tmp/device-kit-tests && mkdir -p /tmp/device-kit-tests/tests
+for f in cocog-engine/tests/*.rs plugins/train/tests/*.rs; do
+    n=$(basename "$f" .rs)
+    [[ $n == gpu_* || $n == nn_* ]] || continue
+    exe=$(newest target/debug/deps "$n")
+    [[ -n "$exe" ]] || { echo "device-kit: no test executable for $n" >&2; exit 1; }
+    strip -o "/tmp/device-kit-tests/tests/$n" "$exe"
+done
+tar cJf .device/tests.tar.xz -C /tmp/device-kit-tests tests
+
+rm -rf .device/bench && mkdir -p .device/bench/defocus-dev
+cp -r "$shared/bench/sharp-dev" .device/bench/
+for s in dev-table dev-shelf; do
+    cp -r "$shared/bench/defocus-dev/$s" .device/bench/defocus-dev/
+done
+rm -rf .device/bench/*/depth .device/bench/*/*/depth .device/bench/*/*/baseline
+
+if [[ ! -f .device/lpips/alex.safetensors ]]; then
+    scripts/lpips/fetch-weights.sh .device/lpips
+    rm -f .device/lpips/vgg.safetensors
+fi
+[[ -f .device/gsplat-1.5.3-py3-none-any.whl ]] ||
+    python3 -m pip download -q --no-deps -d .device gsplat==1.5.3
+
+tree=$(git ls-files -z | du -cb --files0-from=- | tail -1 | cut -f1)
+kit=$(du -sb .gl .device | awk '{s += $1} END {print s}')
+mib=$(( (tree + kit + 1048575) / 1048576 ))
+echo "device-kit: $(git rev-parse --short HEAD), about $mib MiB with the tracked tree (limit 64)"
+((mib < 64)) || { echo "device-kit: over the 64 MiB the run tool carries" >&2; exit 1; }
