@@ -9,7 +9,7 @@ mod common;
 use cocog_engine::{
     CoopBlock, CoopFragments, Gemm, GemmLayout, GemmShape, GemmTile, OperandScales, Workspace,
 };
-use common::{Rng, gpu};
+use common::{Rng, gpu, run_gemm};
 
 /// C = A·B of row-major A (M×K) and B (K×N); with split K, summed over the batches too.
 const PLAIN: &str = "@group(0) @binding(2) var<storage, read> a: array<f32>;
@@ -94,11 +94,6 @@ fn product_matches_f64(ctx: &cocog_engine::GpuContext, name: &str, block: CoopBl
         };
         let (a, b) = (half(batches * m * k), half(batches * k * n));
         let outputs = if split_k { 1 } else { batches };
-        let ga = ctx.storage_from("a", &a);
-        let gb = ctx.storage_from("b", &b);
-        let gc = ctx.storage("c", (outputs * m * n * 4) as u64);
-        let mut ws = Workspace::default();
-        let mut rec = ctx.recorder();
         let shape = GemmShape {
             m: m as u32,
             n: n as u32,
@@ -106,9 +101,7 @@ fn product_matches_f64(ctx: &cocog_engine::GpuContext, name: &str, block: CoopBl
             batches: batches as u32,
             ..Default::default()
         };
-        gemm.encode(&mut rec, &mut ws, shape, &[(2, &ga), (3, &gb), (4, &gc)]);
-        rec.submit();
-        let got: Vec<f32> = ctx.read(&gc, outputs * m * n).expect("read C");
+        let got = run_gemm(ctx, &gemm, shape, &a, &b, outputs);
         for o in 0..outputs {
             let summed = if split_k { 0..batches } else { o..o + 1 };
             for i in 0..m {

@@ -3,8 +3,8 @@
 
 mod common;
 
-use cocog_engine::{Gemm, GemmLayout, GemmShape, GemmTile, Workspace};
-use common::{Rng, gpu};
+use cocog_engine::{Gemm, GemmLayout, GemmShape, GemmTile};
+use common::{Rng, gpu, run_gemm};
 
 /// A problem over plain matrices, `batches` of them: A is M×K, B is K×N, stored row-major or
 /// transposed as the layout says; C = A·B + 0.5 lands row-major in `c` (the epilogue's offset
@@ -55,11 +55,7 @@ fn check(layout: GemmLayout, m: usize, n: usize, k: usize, batches: usize, seed:
         })
     };
     let gemm = Gemm::new(ctx, "test gemm", &problem(layout), layout);
-    let (ga, gb) = (ctx.storage_from("a", &a), ctx.storage_from("b", &b));
     let outputs = if layout.split_k { 1 } else { batches };
-    let gc = ctx.storage("c", (outputs * m * n * 4) as u64);
-    let mut ws = Workspace::default();
-    let mut rec = ctx.recorder();
     let shape = GemmShape {
         m: m as u32,
         n: n as u32,
@@ -67,9 +63,7 @@ fn check(layout: GemmLayout, m: usize, n: usize, k: usize, batches: usize, seed:
         batches: batches as u32,
         ..Default::default()
     };
-    gemm.encode(&mut rec, &mut ws, shape, &[(2, &ga), (3, &gb), (4, &gc)]);
-    rec.submit();
-    let got: Vec<f32> = ctx.read(&gc, outputs * m * n).unwrap();
+    let got = run_gemm(ctx, &gemm, shape, &a, &b, outputs);
     for o in 0..outputs {
         let summed: Vec<usize> = if layout.split_k {
             (0..batches).collect()

@@ -99,3 +99,23 @@ pub fn random_weights(npix: usize, seed: u64) -> (Vec<[f64; 3]>, Vec<f64>, Vec<f
 
 #[allow(unused_imports)] // not every test binary that includes this module runs on the GPU
 pub use cocog_engine::test_gpu as gpu;
+
+/// Runs `gemm` once on a plain problem's operands (its prelude binds A at 2, B at 3 and C at 4)
+/// and reads back `outputs` × M × N values of C.
+pub fn run_gemm(
+    ctx: &cocog_engine::GpuContext,
+    gemm: &cocog_engine::Gemm,
+    shape: cocog_engine::GemmShape,
+    a: &[f32],
+    b: &[f32],
+    outputs: usize,
+) -> Vec<f32> {
+    let len = outputs * shape.m as usize * shape.n as usize;
+    let (ga, gb) = (ctx.storage_from("a", a), ctx.storage_from("b", b));
+    let gc = ctx.storage("c", (len * 4) as u64);
+    let mut ws = cocog_engine::Workspace::default();
+    let mut rec = ctx.recorder();
+    gemm.encode(&mut rec, &mut ws, shape, &[(2, &ga), (3, &gb), (4, &gc)]);
+    rec.submit();
+    ctx.read(&gc, len).expect("read C")
+}
