@@ -192,3 +192,43 @@ fn backward_without_the_depth_channel_matches_reference() {
         check_with(ctx, &renderer, &[view], seed + 100, false);
     }
 }
+
+/// The backward in 8×8 blocks of a tile (`with_raster_block`, forward too): both accumulation paths,
+/// with and without the depth channel, then a batch of frames whose sides are multiples of
+/// neither 8 nor 16.
+#[test]
+fn backward_in_8x8_blocks_matches_reference() {
+    let Some(ctx) = gpu() else { return };
+    for (renderer, seed, depth) in [
+        (Renderer::new(ctx).with_raster_block(ctx, 8), 31, true),
+        (Renderer::new(ctx).with_raster_block(ctx, 8), 32, false),
+        (
+            Renderer::with_options(ctx, false, false).with_raster_block(ctx, 8),
+            33,
+            true,
+        ),
+    ] {
+        let (g, cam) = one_image(3, 60, seed);
+        let view = View {
+            gaussians: &g,
+            camera: &cam,
+            background: [0.2, 0.4, 0.9],
+        };
+        check_with(ctx, &renderer, &[view], seed + 100, depth);
+    }
+    let renderer = Renderer::new(ctx).with_raster_block(ctx, 8);
+    let cams: Vec<Camera> = (0..2)
+        .map(|i| test_camera(45, 37, 0.1 * f64::from(i)))
+        .collect();
+    let sets: Vec<GaussianParams> = (0..2)
+        .map(|i| random_scene(50, 2, 70 + i as u64, &cams[i]))
+        .collect();
+    let views: Vec<View<'_>> = (0..2)
+        .map(|i| View {
+            gaussians: &sets[i],
+            camera: &cams[i],
+            background: [0.1, 0.3 * i as f32, 0.6],
+        })
+        .collect();
+    check(ctx, &renderer, &views, 41);
+}

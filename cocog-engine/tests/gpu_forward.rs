@@ -13,8 +13,13 @@ fn compare(views: &[View<'_>]) {
 
 /// `compare`, where more than `min_visible` of each view's Gaussians must be visible.
 fn compare_with(views: &[View<'_>], min_visible: f64) {
+    compare_in_blocks(views, min_visible, 16);
+}
+
+/// `compare_with`, compositing in workgroups of `block`² pixels.
+fn compare_in_blocks(views: &[View<'_>], min_visible: f64, block: u32) {
     let Some(ctx) = gpu() else { return };
-    let renderer = Renderer::new(ctx);
+    let renderer = Renderer::new(ctx).with_raster_block(ctx, block);
     let batch = Batch::from_views(ctx, views).unwrap();
     let state = renderer.forward(ctx, &batch).unwrap();
     assert!(state.num_intersections > 0);
@@ -200,4 +205,38 @@ fn tile_culling_drops_intersections_without_changing_pixels() {
         "tile test removed too little: {k} of {boxed}"
     );
     compare(&[view]);
+}
+
+/// Compositing in 8×8 blocks of a tile (`with_raster_block`): a batch of frames whose sides
+/// are multiples of neither 8 nor 16, then a dense scene where blocks stop early.
+#[test]
+fn eight_by_eight_blocks_match_reference() {
+    let cams: Vec<Camera> = (0..2)
+        .map(|i| test_camera(45, 37, 0.1 * f64::from(i)))
+        .collect();
+    let sets: Vec<GaussianParams> = (0..2)
+        .map(|i| random_scene(60, 2, 80 + i as u64, &cams[i]))
+        .collect();
+    let views: Vec<View<'_>> = (0..2)
+        .map(|i| View {
+            gaussians: &sets[i],
+            camera: &cams[i],
+            background: [0.2, 0.5, 0.3 * i as f32],
+        })
+        .collect();
+    compare_in_blocks(&views, 0.5, 8);
+    let cam = test_camera(64, 48, 0.0);
+    let mut g = random_scene(400, 1, 5, &cam);
+    for o in &mut g.opacity_logits {
+        *o += 3.0;
+    }
+    compare_in_blocks(
+        &[View {
+            gaussians: &g,
+            camera: &cam,
+            background: [1.0, 1.0, 1.0],
+        }],
+        0.5,
+        8,
+    );
 }

@@ -1,6 +1,7 @@
-// Front-to-back compositing: one 16×16 workgroup per (tile, image), one thread per pixel.
-// Each batch of up to 256 projected Gaussians is staged in shared memory by all threads;
-// the workgroup stops once every pixel's transmittance has run out.
+// Front-to-back compositing: one workgroup per SUB×SUB block of a 16×16 tile (SUB, 16 or 8,
+// from the host) and image, one thread per pixel. Each batch of up to SUB² projected Gaussians
+// of the tile's list is staged in shared memory by all threads; the workgroup stops once every
+// pixel's transmittance has run out. A pixel's result does not depend on SUB.
 
 struct Params {
     width: u32,
@@ -19,27 +20,29 @@ struct Params {
 @group(0) @binding(7) var<storage, read_write> out_t: array<f32>;
 @group(0) @binding(8) var<storage, read_write> out_last: array<u32>;
 
-const BATCH: u32 = 256u;
+const BATCH: u32 = SUB * SUB;
+// Blocks per tile side.
+const PER_TILE: u32 = 16u / SUB;
 const ALPHA_MAX: f32 = 0.99;
 const ALPHA_MIN: f32 = 1.0 / 255.0;
 const T_MIN: f32 = 1e-4;
 
-var<workgroup> batch_a: array<vec4<f32>, 256>;
-var<workgroup> batch_b: array<vec4<f32>, 256>;
-var<workgroup> batch_c: array<vec4<f32>, 256>;
+var<workgroup> batch_a: array<vec4<f32>, BATCH>;
+var<workgroup> batch_b: array<vec4<f32>, BATCH>;
+var<workgroup> batch_c: array<vec4<f32>, BATCH>;
 var<workgroup> done_count: atomic<u32>;
 var<workgroup> done_snapshot: u32;
 
-@compute @workgroup_size(16, 16, 1)
+@compute @workgroup_size(SUB, SUB, 1)
 fn rasterize(
     @builtin(workgroup_id) wid: vec3<u32>,
     @builtin(local_invocation_id) lid: vec3<u32>,
     @builtin(local_invocation_index) tid: u32,
 ) {
     let image = wid.z;
-    let tile = (image * params.tiles_y + wid.y) * params.tiles_x + wid.x;
-    let px = wid.x * 16u + lid.x;
-    let py = wid.y * 16u + lid.y;
+    let tile = (image * params.tiles_y + wid.y / PER_TILE) * params.tiles_x + wid.x / PER_TILE;
+    let px = wid.x * SUB + lid.x;
+    let py = wid.y * SUB + lid.y;
     let inside = px < params.width && py < params.height;
     let centre = vec2<f32>(f32(px) + 0.5, f32(py) + 0.5);
     let range = ranges[tile];

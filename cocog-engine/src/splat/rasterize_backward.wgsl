@@ -1,6 +1,8 @@
-// Compositing backward: one 16×16 workgroup per (tile, image) replays the tile's list back
-// to front, each subgroup (or pixel) from the last Gaussian it used, recovering each
-// transmittance by division, and accumulates per-Gaussian screen-space gradients with atomics.
+// Compositing backward: one workgroup per SUB×SUB block of a 16×16 tile (SUB, 16 or 8, from the
+// host) and image replays the tile's list back to front, each subgroup (or pixel) from the last
+// Gaussian it used, recovering each transmittance by division, and accumulates per-Gaussian
+// screen-space gradients with atomics. Blocks of 8×8 walk each list four times over, but give a
+// small frame (a 100×75 photo has 35 tiles) four times the workgroups to spread over a GPU.
 // v_proj layout per Gaussian: mean2d (2), conic (3), colour (3), opacity, depth.
 // The host appends `add_grad` and the `v_proj` binding (slot 9) — native float atomics where
 // the adapter has them, a compare-exchange loop otherwise — and `flush`, which either adds
@@ -26,30 +28,32 @@ struct Params {
 @group(0) @binding(6) var<storage, read> out_last: array<u32>;
 @group(0) @binding(7) var<storage, read> v_rgba: array<vec4<f32>>;
 
-const BATCH: u32 = 256u;
+const BATCH: u32 = SUB * SUB;
+// Blocks per tile side.
+const PER_TILE: u32 = 16u / SUB;
 const ALPHA_MAX: f32 = 0.99;
 const ALPHA_MIN: f32 = 1.0 / 255.0;
 const V_STRIDE: u32 = 10u;
 
-var<workgroup> batch_a: array<vec4<f32>, 256>;
-var<workgroup> batch_b: array<vec4<f32>, 256>;
-var<workgroup> batch_c: array<vec4<f32>, 256>;
-var<workgroup> batch_id: array<u32, 256>;
+var<workgroup> batch_a: array<vec4<f32>, BATCH>;
+var<workgroup> batch_b: array<vec4<f32>, BATCH>;
+var<workgroup> batch_c: array<vec4<f32>, BATCH>;
+var<workgroup> batch_id: array<u32, BATCH>;
 var<workgroup> tile_end: atomic<u32>;
 var<workgroup> tile_end_snapshot: u32;
 
 // One-dimensional workgroup: subgroup builtins are only defined for those.
-@compute @workgroup_size(256)
+@compute @workgroup_size(BATCH)
 fn rasterize_backward(
     @builtin(workgroup_id) wid: vec3<u32>,
     @builtin(local_invocation_index) tid: u32,
     // SUBGROUP_PARAM
 ) {
-    let lid = vec2<u32>(tid % 16u, tid / 16u);
+    let lid = vec2<u32>(tid % SUB, tid / SUB);
     let image = wid.z;
-    let tile = (image * params.tiles_y + wid.y) * params.tiles_x + wid.x;
-    let px = wid.x * 16u + lid.x;
-    let py = wid.y * 16u + lid.y;
+    let tile = (image * params.tiles_y + wid.y / PER_TILE) * params.tiles_x + wid.x / PER_TILE;
+    let px = wid.x * SUB + lid.x;
+    let py = wid.y * SUB + lid.y;
     let inside = px < params.width && py < params.height;
     let centre = vec2<f32>(f32(px) + 0.5, f32(py) + 0.5);
     let range = ranges[tile];

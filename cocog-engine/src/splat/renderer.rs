@@ -66,10 +66,23 @@ pub struct Renderer {
     rasterize_backward: [OnceLock<Kernel>; 2],
     /// Overrides the device's binding limit (tests of the banded paths at small sizes).
     binding_limit: Option<u64>,
+    /// The compositing forward's and backward's workgroup: a `raster_block`² block of a 16×16
+    /// tile.
+    raster_block: u32,
 }
 
 fn groups(n: u32) -> u32 {
     n.div_ceil(256)
+}
+
+/// `COCOG_RASTER_BLOCK=8` runs the compositing forward and backward in 8×8 blocks of a tile
+/// (experimental: which is faster depends on the GPU and the frame's tile count); anything else,
+/// in 16×16 tiles.
+fn raster_block_from_env() -> u32 {
+    match std::env::var("COCOG_RASTER_BLOCK").as_deref() {
+        Ok("8") => 8,
+        _ => 16,
+    }
 }
 
 impl Renderer {
@@ -102,7 +115,7 @@ impl Renderer {
             "tiles",
             &format!("{tile_test}\n{}", include_str!("tiles.wgsl")),
         );
-        let raster = shader(ctx, "rasterize", include_str!("rasterize.wgsl"));
+        let block = raster_block_from_env();
         let atomics = if native_atomics && ctx.float_atomics {
             include_str!("atomic_native.wgsl")
         } else {
@@ -129,10 +142,11 @@ impl Renderer {
             emit_keys: Kernel::new(ctx, &tiles, "emit_keys"),
             tile_ranges: Kernel::new(ctx, &tiles, "tile_ranges"),
             check_capacity: Kernel::new(ctx, &tiles, "check_capacity"),
-            rasterize: Kernel::new(ctx, &raster, "rasterize"),
+            rasterize: Self::rasterize_kernel(ctx, block),
             rasterize_backward_src,
             rasterize_backward: Default::default(),
             binding_limit: None,
+            raster_block: block,
         }
     }
 
@@ -346,6 +360,7 @@ impl Renderer {
             num_intersections: capacity,
         };
         let raster = rec.uniform(&Self::raster_params(batch));
+        let per_tile = 16 / self.raster_block;
         self.rasterize.dispatch(
             rec,
             &[
@@ -359,14 +374,33 @@ impl Renderer {
                 (7, &state.final_t),
                 (8, &state.last),
             ],
-            [tiles_x, tiles_y, batch.num_images()],
+            [tiles_x * per_tile, tiles_y * per_tile, batch.num_images()],
         );
         state
+    }
+
+    /// The compositing forward and backward in workgroups of `side`² pixels (16: a tile; 8: a
+    /// quarter of one), where the default (`COCOG_RASTER_BLOCK`, else 16) is not wanted. Other
+    /// sides are taken as 16.
+    pub fn with_raster_block(mut self, ctx: &GpuContext, side: u32) -> Self {
+        self.raster_block = if side == 8 { 8 } else { 16 };
+        self.rasterize = Self::rasterize_kernel(ctx, self.raster_block);
+        self.rasterize_backward = Default::default();
+        self
+    }
+
+    fn rasterize_kernel(ctx: &GpuContext, block: u32) -> Kernel {
+        let src = format!(
+            "const SUB: u32 = {block}u;\n{}",
+            include_str!("rasterize.wgsl")
+        );
+        Kernel::new(ctx, &shader(ctx, "rasterize", &src), "rasterize")
     }
 
     /// The compositing backward, with or without the depth channel.
     fn rasterize_backward(&self, ctx: &GpuContext, depth: bool) -> &Kernel {
         self.rasterize_backward[usize::from(depth)].get_or_init(|| {
+            let sub = self.raster_block;
             let prelude = if depth {
                 "const DEPTH_GRAD: bool = true;\n\
                  @group(0) @binding(8) var<storage, read> v_depth: array<f32>;\n\
@@ -380,7 +414,10 @@ impl Renderer {
             } else {
                 "rasterize_backward (no depth)"
             };
-            let src = format!("{prelude}\n{}", self.rasterize_backward_src);
+            let src = format!(
+                "const SUB: u32 = {sub}u;\n{prelude}\n{}",
+                self.rasterize_backward_src
+            );
             Kernel::labelled(ctx, &shader(ctx, label, &src), "rasterize_backward", label)
         })
     }
@@ -441,10 +478,11 @@ impl Renderer {
         if let Some(v_depth) = v_depth {
             binds.push((8, v_depth));
         }
+        let per_tile = 16 / self.raster_block;
         self.rasterize_backward(ctx, v_depth.is_some()).dispatch(
             rec,
             &binds,
-            [tiles_x, tiles_y, batch.num_images()],
+            [tiles_x * per_tile, tiles_y * per_tile, batch.num_images()],
         );
         let p = &batch.params;
         self.project_backward.dispatch_1d(
