@@ -22,7 +22,8 @@
 #                   implicit GEMMs and as tiled kernels (COCOG_F_CONV=tiled), and with F's maps
 #                   in f32 (COCOG_NO_F16=1) as well as f16, with the per-kernel split
 #                   (--kernels), and on tensor cores (COCOG_F_CONV=coop, f16 operands,
-#                   experimental); the 3dgs step and the cocog step at 400×300 on the same
+#                   experimental), and both steps compositing in 8×8 blocks
+#                   (COCOG_RASTER_BLOCK=8); the 3dgs step (both blocks) and the cocog step at 400×300 on the same
 #                   Gaussians, F on the f32 products and on tensor cores in every block layout
 #                   (COCOG_COOP_BLOCK; what a step of #12's full-size gate costs); then, where
 #                   DEV has gemm-bench (`cargo bench --bench gemm --no-run`, stripped), F's 3×3
@@ -116,12 +117,14 @@ phase_step() {
     bounded 120 "$cocog" train "$work/in-dev-table" -o "$model" --downscale 4 --method 3dgs \
         --iterations 5000 --checkpoint-every 0 -q --force >>"$log" 2>&1
     local m vars
-    for m in 3dgs cocog cocog-tiled cocog-f32 cocog-coop; do
+    for m in 3dgs cocog cocog-tiled cocog-f32 cocog-coop 3dgs-b8 cocog-b8; do
         echo "-- $m step on the model's Gaussians" >>"$log"
         vars=(COCOG_F_CONV=gemm)
         [[ $m == *-tiled ]] && vars=(COCOG_F_CONV=tiled)
         [[ $m == *-coop ]] && vars=(COCOG_F_CONV=coop COCOG_COOPERATIVE_MATRIX=1)
         [[ $m == *-f32 ]] && vars+=(COCOG_NO_F16=1)
+        # Compositing in 8×8 blocks of a tile (four times the workgroups on a 100×75 frame).
+        [[ $m == *-b8 ]] && vars+=(COCOG_RASTER_BLOCK=8)
         bounded 60 env "${vars[@]}" "$cocog" bench "$work/in-dev-table" --downscale 4 \
             --resume "$model" --method "${m%%-*}" --iterations 100 --warmup 10 --kernels \
             >>"$log" 2>&1
@@ -129,9 +132,11 @@ phase_step() {
     # The same Gaussians at full size (400×300): what a step of #12's full-size gate costs,
     # against the 3dgs step there, on the f32 products and on tensor cores in every block
     # layout (CoopBlock).
-    echo "-- 3dgs step at 400×300 on the model's Gaussians" >>"$log"
-    bounded 60 "$cocog" bench "$work/in-dev-table" --downscale 1 --resume "$model" \
-        --method 3dgs --iterations 100 --warmup 10 >>"$log" 2>&1
+    for b in 16 8; do
+        echo "-- 3dgs step at 400×300 on the model's Gaussians, COCOG_RASTER_BLOCK=$b" >>"$log"
+        bounded 60 env COCOG_RASTER_BLOCK=$b "$cocog" bench "$work/in-dev-table" --downscale 1 \
+            --resume "$model" --method 3dgs --iterations 100 --warmup 10 --kernels >>"$log" 2>&1
+    done
     for m in gemm coop:4x4 coop:4x8 coop:4x16 coop:4x8k4 coop:8x8 coop:4x4p coop:4x8p; do
         echo "-- cocog step at 400×300 on the model's Gaussians, COCOG_F_CONV=${m%%:*} block ${m#*:}" >>"$log"
         bounded 60 env COCOG_F_CONV=${m%%:*} COCOG_COOP_BLOCK=${m#*:} \
@@ -165,6 +170,13 @@ phase_peer_train() {
         --checkpoint-every 0 --force >>"$log" 2>&1
     echo "cocog train: $((SECONDS - t0)) s wall" >>"$log"
     bounded 60 "$cocog" eval "$out" >>"$log" 2>&1
+    # The 3dgs step at the run's end, compositing in 16×16 tiles and in 8×8 blocks.
+    local b
+    for b in 16 8; do
+        echo "-- 3dgs step on the trained model, COCOG_RASTER_BLOCK=$b" >>"$log"
+        bounded 40 env COCOG_RASTER_BLOCK=$b "$cocog" bench "$work/in-sharp-dev" --resume "$out" \
+            --method 3dgs --iterations 200 --warmup 20 --kernels >>"$log" 2>&1
+    done
     gsplat_ready && bounded 600 python3 "$root/bench/peer_gsplat.py" train "$work/in-sharp-dev" \
         --out "$results/gsplat-sharp-dev" --iterations 30000 >>"$log" 2>&1
     rm -f "$results"/gsplat-sharp-dev/renders/*.png
