@@ -16,18 +16,25 @@
 # past it. Takes about 10 minutes on 2 cores from a clean target/.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+shared="$(cd "${1:-$root/../shared}" && pwd)"
 cd "$root"
-shared="${1:-$root/../shared}"
 [[ -d "$shared/bench/sharp-dev" ]] || { echo "device-kit: no $shared/bench/sharp-dev" >&2; exit 1; }
+exclude="$(git rev-parse --git-path info/exclude)"
+mkdir -p "$(dirname "$exclude")"
 for p in /.gl/ /.device/; do
-    grep -qxF "$p" .git/info/exclude 2>/dev/null || echo "$p" >>.git/info/exclude
+    grep -qxF "$p" "$exclude" 2>/dev/null || echo "$p" >>"$exclude"
 done
 
-if ! ls .gl/libvulkan1_*.deb >/dev/null 2>&1; then
+debs=(libvulkan1 libegl1 libglvnd0 libopengl0 libgl1 libglx0 libgles2)
+missing=0
+for d in "${debs[@]}"; do
+    compgen -G ".gl/${d}_*.deb" >/dev/null || missing=1
+done
+if ((missing)); then
     mkdir -p .gl /tmp/device-kit-apt/partial
     o=(-oAPT::Architecture=amd64 -oAPT::Architectures=amd64 -oDir::State::Lists=/tmp/device-kit-apt)
     apt-get "${o[@]}" update -qq
-    (cd .gl && apt-get "${o[@]}" download libvulkan1 libegl1 libglvnd0 libopengl0 libgl1 libglx0 libgles2)
+    (cd .gl && apt-get "${o[@]}" download "${debs[@]}")
 fi
 
 mkdir -p .device
@@ -35,19 +42,28 @@ cargo build --release -p cocog-cli
 strip -o /tmp/device-kit-cocog target/release/cocog
 xz -T0 -6 -c /tmp/device-kit-cocog >.device/cocog.xz
 
-# The newest executable of a cargo target in a deps folder.
-newest() { ls -t "$1"/"$2"-* 2>/dev/null | grep -v '\.d$' | head -1; }
-cargo bench -p cocog-engine --bench gemm --no-run
-strip -o /tmp/device-kit-gemm "$(newest target/release/deps gemm)"
+# "NAME PATH" of every test or bench executable the cargo command built, as cargo reports
+# them (target/*/deps holds older builds of the same targets too).
+executables() {
+    "$@" --no-run --message-format=json | python3 -c '
+import json, sys
+for line in sys.stdin:
+    m = json.loads(line)
+    if m.get("reason") == "compiler-artifact" and m.get("executable") and m["profile"]["test"]:
+        print(m["target"]["name"], m["executable"])'
+}
+gemm=$(executables cargo bench -p cocog-engine --bench gemm | awk '$1 == "gemm" { print $2 }')
+[[ -n "$gemm" ]] || { echo "device-kit: cargo built no gemm bench" >&2; exit 1; }
+strip -o /tmp/device-kit-gemm "$gemm"
 xz -T0 -c /tmp/device-kit-gemm >.device/gemm-bench.xz
 
-cargo test -p cocog-engine -p cocog-train --no-run
 rm -rf /tmp/device-kit-tests && mkdir -p /tmp/device-kit-tests/tests
+executables cargo test -p cocog-engine -p cocog-train >/tmp/device-kit-tests/list
 for f in cocog-engine/tests/*.rs plugins/train/tests/*.rs; do
     n=$(basename "$f" .rs)
     [[ $n == gpu_* || $n == nn_* ]] || continue
-    exe=$(newest target/debug/deps "$n")
-    [[ -n "$exe" ]] || { echo "device-kit: no test executable for $n" >&2; exit 1; }
+    exe=$(awk -v n="$n" '$1 == n { print $2 }' /tmp/device-kit-tests/list)
+    [[ -n "$exe" ]] || { echo "device-kit: cargo built no test executable $n" >&2; exit 1; }
     strip -o "/tmp/device-kit-tests/tests/$n" "$exe"
 done
 tar cJf .device/tests.tar.xz -C /tmp/device-kit-tests tests
@@ -64,9 +80,11 @@ if [[ ! -f .device/lpips/alex.safetensors ]]; then
     rm -f .device/lpips/vgg.safetensors
 fi
 [[ -f .device/gsplat-1.5.3-py3-none-any.whl ]] ||
-    python3 -m pip download -q --no-deps -d .device gsplat==1.5.3
+    python3 -m pip download -q --no-deps --only-binary=:all: -d .device gsplat==1.5.3
 
-tree=$(git ls-files -z | du -cb --files0-from=- | tail -1 | cut -f1)
+# What the run tool carries besides: tracked files and untracked ones git does not ignore.
+tree=$(git ls-files -z --cached --others --exclude-standard |
+    du -cb --files0-from=- 2>/dev/null | tail -1 | cut -f1 || true)
 kit=$(du -sb .gl .device | awk '{s += $1} END {print s}')
 mib=$(( (tree + kit + 1048575) / 1048576 ))
 echo "device-kit: $(git rev-parse --short HEAD), about $mib MiB with the tracked tree (limit 64)"

@@ -4,10 +4,11 @@
 #   bench/gpu-session.sh RESULTS [PHASE...]  (default: step peer-synthetic tests peer-train)
 #
 # A 15-minute lease holds the machine's start (about 40 s on 2026-11-27) and about 800 s of
-# calls; a machine left idle for 30 s is gone. Measured on an H200 (2026-11-27): step 45 s,
+# calls; a machine left idle for 30 s is gone. Measured on an H200 (2026-11-27), before the
+# step phase's block-layout and raster-block runs were added (about 30 s more now): step 45 s,
 # peer-synthetic 85 s (65 of them gsplat's CUDA build), tests 55 s, peer-train 250 s with gsplat
-# built: the default phases fit one call of BUDGET=540, which leaves time for a second call
-# (e.g. `gates`) only if it is made at once.
+# built (plus up to 40 s of benches after the peer now): the default phases fit one call of
+# BUDGET=540, which leaves time for a second call (e.g. `gates`) only if it is made at once.
 #
 # BUDGET (seconds, default 560) bounds the whole call: a phase that would not fit what is left is
 # skipped and says so in RESULTS/session.txt, and every command's timeout is cut to what is
@@ -29,7 +30,7 @@
 #                   DEV has gemm-bench (`cargo bench --bench gemm --no-run`, stripped), F's 3×3
 #                   layer as a plain GEMM at 100×75 and 400×300 on the f32 tiled product and on
 #                   tensor cores in every layout (COCOG_COOPERATIVE_MATRIX=1)
-#                                                        ~65 s on an H200 (45 s before layouts)
+#                                               ~75 s on an H200 (45 s measured before layouts)
 #   peer-synthetic  #11: `cocog bench --synthetic 1000000 --size 1920x1080` (and with --zoom 3,
 #                   most Gaussians culled, per kernel), then gsplat on the same Gaussians and
 #                   cameras (peer_gsplat.py workload)                             ~20 s + gsplat build (65 s)
@@ -137,8 +138,8 @@ phase_step() {
         bounded 60 env COCOG_RASTER_BLOCK=$b "$cocog" bench "$work/in-dev-table" --downscale 1 \
             --resume "$model" --method 3dgs --iterations 100 --warmup 10 --kernels >>"$log" 2>&1
     done
-    for m in gemm coop:4x4 coop:4x8 coop:4x16 coop:4x8k4 coop:8x8 coop:4x4p coop:4x8p; do
-        echo "-- cocog step at 400×300 on the model's Gaussians, COCOG_F_CONV=${m%%:*} block ${m#*:}" >>"$log"
+    for m in gemm:4x4 coop:4x4 coop:4x8 coop:4x16 coop:4x8k4 coop:8x8 coop:4x4p coop:4x8p; do
+        echo "-- cocog step at 400×300 on the model's Gaussians, COCOG_F_CONV=${m%%:*}$([[ $m == coop* ]] && echo " block ${m#*:}")" >>"$log"
         bounded 60 env COCOG_F_CONV=${m%%:*} COCOG_COOP_BLOCK=${m#*:} \
             COCOG_COOPERATIVE_MATRIX=$([[ $m == coop* ]] && echo 1 || echo 0) \
             "$cocog" bench "$work/in-dev-table" --downscale 1 --resume "$model" --method cocog \
@@ -170,16 +171,17 @@ phase_peer_train() {
         --checkpoint-every 0 --force >>"$log" 2>&1
     echo "cocog train: $((SECONDS - t0)) s wall" >>"$log"
     bounded 60 "$cocog" eval "$out" >>"$log" 2>&1
-    # The 3dgs step at the run's end, compositing in 16×16 tiles and in 8×8 blocks.
-    local b
-    for b in 16 8; do
-        echo "-- 3dgs step on the trained model, COCOG_RASTER_BLOCK=$b" >>"$log"
-        bounded 40 env COCOG_RASTER_BLOCK=$b "$cocog" bench "$work/in-sharp-dev" --resume "$out" \
-            --method 3dgs --iterations 200 --warmup 20 --kernels >>"$log" 2>&1
-    done
     gsplat_ready && bounded 600 python3 "$root/bench/peer_gsplat.py" train "$work/in-sharp-dev" \
         --out "$results/gsplat-sharp-dev" --iterations 30000 >>"$log" 2>&1
     rm -f "$results"/gsplat-sharp-dev/renders/*.png
+    # After the peer, which the phase is for: the 3dgs step at the run's end, compositing in
+    # 16×16 tiles and in 8×8 blocks.
+    local b
+    for b in 16 8; do
+        echo "-- 3dgs step on the trained model, COCOG_RASTER_BLOCK=$b" >>"$log"
+        bounded 20 env COCOG_RASTER_BLOCK=$b "$cocog" bench "$work/in-sharp-dev" --resume "$out" \
+            --method 3dgs --iterations 200 --warmup 20 --kernels >>"$log" 2>&1
+    done
 }
 
 phase_idle_bench() {
@@ -221,7 +223,7 @@ while ((i < ${#phases[@]})); do
     case "$p" in
         step) run_phase step 120 ;;
         peer-synthetic) run_phase peer-synthetic 165 ;;
-        peer-train) run_phase peer-train 330 ;;
+        peer-train) run_phase peer-train 360 ;;
         idle-bench) run_phase idle-bench 120 ;;
         tests) run_phase tests 90 ;;
         gates)

@@ -11,14 +11,28 @@ use cocog_engine::{
 };
 use common::{Rng, gpu, run_gemm};
 
-/// C = A·B of row-major A (M×K) and B (K×N); with split K, summed over the batches too.
-const PLAIN: &str = "@group(0) @binding(2) var<storage, read> a: array<f32>;
-@group(0) @binding(3) var<storage, read> b: array<f32>;
-@group(0) @binding(4) var<storage, read_write> c: array<f32>;
-fn load_a(bt: u32, m: u32, k: u32) -> f32 { return a[(bt * gemm.m + m) * gemm.k + k]; }
-fn load_b(bt: u32, k: u32, n: u32) -> f32 { return b[(bt * gemm.k + k) * gemm.n + n]; }
-fn epilogue(bt: u32, m: u32, n: u32, v: f32) { c[(bt * gemm.m + m) * gemm.n + n] = v; }
-";
+/// C = A·B of A (M×K) and B (K×N), each stored contiguous along K or not as the layout says;
+/// with split K, summed over the batches too. C is row-major.
+fn plain(layout: GemmLayout) -> String {
+    let a = if layout.a_k_fast {
+        "a[(bt * gemm.m + m) * gemm.k + k]"
+    } else {
+        "a[(bt * gemm.k + k) * gemm.m + m]"
+    };
+    let b = if layout.b_k_fast {
+        "b[(bt * gemm.n + n) * gemm.k + k]"
+    } else {
+        "b[(bt * gemm.k + k) * gemm.n + n]"
+    };
+    format!(
+        "@group(0) @binding(2) var<storage, read> a: array<f32>;\n\
+         @group(0) @binding(3) var<storage, read> b: array<f32>;\n\
+         @group(0) @binding(4) var<storage, read_write> c: array<f32>;\n\
+         fn load_a(bt: u32, m: u32, k: u32) -> f32 {{ return {a}; }}\n\
+         fn load_b(bt: u32, k: u32, n: u32) -> f32 {{ return {b}; }}\n\
+         fn epilogue(bt: u32, m: u32, n: u32, v: f32) {{ c[(bt * gemm.m + m) * gemm.n + n] = v; }}\n"
+    )
+}
 
 /// Prints why the test does not run; fails instead where it was asked for
 /// (`COCOG_COOPERATIVE_MATRIX=1`) on an adapter that offers what the kernel needs, so a context
@@ -71,19 +85,29 @@ fn cooperative_product_matches_f64_where_the_adapter_has_them() {
     assert!(ran > 0 && Gemm::fits(ctx, CoopBlock::SQUARE, fragments));
 }
 
-/// One block layout on plain matrices. Sizes off every block (64 × 64 × 32 on 16-wide
-/// fragments, 32 × 32 × 16 on 8-wide, and the wider ones), so edges are padded; split K sums 3
-/// batches in parts.
+/// One block layout on plain matrices, in every operand order without split K and in both
+/// orders of B with it (F's weight gradients: B contiguous along K). Sizes off every block
+/// (64 × 64 × 32 on 16-wide fragments, 32 × 32 × 16 on 8-wide, and the wider ones), so edges
+/// are padded; split K sums 3 batches in parts.
 fn product_matches_f64(ctx: &cocog_engine::GpuContext, name: &str, block: CoopBlock) {
-    for (split_k, (m, n, k, batches)) in [(false, (70, 130, 45, 2)), (true, (20, 33, 700, 3))] {
+    let plain_size = (70, 130, 45, 2);
+    let split_size = (20, 33, 700, 3);
+    for (a_k_fast, b_k_fast, split_k, (m, n, k, batches)) in [
+        (true, false, false, plain_size),
+        (true, true, false, plain_size),
+        (false, false, false, plain_size),
+        (false, true, false, plain_size),
+        (true, false, true, split_size),
+        (true, true, true, split_size),
+    ] {
         let layout = GemmLayout {
-            a_k_fast: true,
-            b_k_fast: false,
+            a_k_fast,
+            b_k_fast,
             split_k,
             tile: GemmTile::SQUARE,
         };
         let scales = OperandScales { a: 4.0, b: 0.5 };
-        let gemm = Gemm::cooperative_with(ctx, "coop test", PLAIN, layout, scales, block)
+        let gemm = Gemm::cooperative_with(ctx, "coop test", &plain(layout), layout, scales, block)
             .expect("cooperative matrices enabled");
         let mut rng = Rng::new(7);
         // f16-representable inputs, so the f64 product sees what the tensor cores multiply.
@@ -109,8 +133,17 @@ fn product_matches_f64(ctx: &cocog_engine::GpuContext, name: &str, block: CoopBl
                     let (mut want, mut mag) = (0.0f64, 0.0f64);
                     for bt in summed.clone() {
                         for kk in 0..k {
-                            let p = f64::from(a[(bt * m + i) * k + kk])
-                                * f64::from(b[(bt * k + kk) * n + j]);
+                            let ai = if a_k_fast {
+                                (bt * m + i) * k + kk
+                            } else {
+                                (bt * k + kk) * m + i
+                            };
+                            let bi = if b_k_fast {
+                                (bt * n + j) * k + kk
+                            } else {
+                                (bt * k + kk) * n + j
+                            };
+                            let p = f64::from(a[ai]) * f64::from(b[bi]);
                             want += p;
                             mag += p.abs();
                         }
@@ -121,7 +154,8 @@ fn product_matches_f64(ctx: &cocog_engine::GpuContext, name: &str, block: CoopBl
                     let tol = 1e-5 * mag + 1e-6;
                     assert!(
                         (g - want).abs() <= tol,
-                        "block {name}, split {split_k}: C[{o}][{i}][{j}] = {g}, want {want} (±{tol})"
+                        "block {name}, A k-fast {a_k_fast}, B k-fast {b_k_fast}, split {split_k}: \
+                         C[{o}][{i}][{j}] = {g}, want {want} (±{tol})"
                     );
                 }
             }

@@ -333,11 +333,13 @@ impl Gemm {
     pub fn fits(ctx: &GpuContext, block: CoopBlock, fragments: CoopFragments) -> bool {
         let limits = ctx.device.limits();
         let (invocations, bytes) = block.footprint(fragments);
+        // One-dimensional workgroups: the whole count lies along x.
         invocations <= limits.max_compute_invocations_per_workgroup
+            && invocations <= limits.max_compute_workgroup_size_x
             && bytes <= limits.max_compute_workgroup_storage_size
     }
 
-    /// `cooperative` in a given layout, which must fit (`fits`).
+    /// `cooperative` in a given layout; `None` also where it does not fit the device (`fits`).
     pub fn cooperative_with(
         ctx: &GpuContext,
         label: &str,
@@ -347,6 +349,9 @@ impl Gemm {
         block: CoopBlock,
     ) -> Option<Self> {
         let fragments = ctx.cooperative?;
+        if !Self::fits(ctx, block, fragments) {
+            return None;
+        }
         let source = Self::cooperative_source(problem, layout, scales, fragments, block);
         let module = shader(ctx, label, &source);
         // The split-K sum is gemm.wgsl's, over the same partials.
@@ -372,14 +377,22 @@ impl Gemm {
     ) -> String {
         let side = fragments.side;
         let [acc, products, stores] = block.lines();
-        let body = concat!(
+        let template = concat!(
             include_str!("gemm_common.wgsl"),
             include_str!("gemm_coop.wgsl")
-        )
-        .replace("    // ACCUMULATORS\n", &acc)
-        .replace("            // PRODUCTS\n", &products)
-        .replace("    // STORES\n", &stores)
-        .replace("coop_mat16x16", &format!("coop_mat{side}x{side}"));
+        );
+        for marker in [
+            "    // ACCUMULATORS\n",
+            "            // PRODUCTS\n",
+            "    // STORES\n",
+        ] {
+            assert!(template.contains(marker), "gemm_coop.wgsl lost {marker:?}");
+        }
+        let body = template
+            .replace("    // ACCUMULATORS\n", &acc)
+            .replace("            // PRODUCTS\n", &products)
+            .replace("    // STORES\n", &stores)
+            .replace("coop_mat16x16", &format!("coop_mat{side}x{side}"));
         let (gm, gn) = block.subgroups;
         let (wm, wn) = block.fragments;
         format!(
