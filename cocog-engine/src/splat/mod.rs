@@ -10,5 +10,5 @@ pub use batch::{
     Batch, Crop, ImageSpec, ParamBuffers, bytes_per_gaussian, check_fits, check_fits_at,
 };
 pub use frame::Frame;
-pub use renderer::{QUAT_TO_ROT_WGSL, Renderer};
+pub use renderer::{QUAT_TO_ROT_WGSL, Renderer, raster_block_from_env};
 pub use state::{ForwardState, Gradients, RenderedImage};

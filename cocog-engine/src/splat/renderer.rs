@@ -78,7 +78,7 @@ fn groups(n: u32) -> u32 {
 /// `COCOG_RASTER_BLOCK=8` runs the compositing forward and backward in 8×8 blocks of a tile
 /// (experimental: which is faster depends on the GPU and the frame's tile count); anything else,
 /// in 16×16 tiles.
-fn raster_block_from_env() -> u32 {
+pub fn raster_block_from_env() -> u32 {
     match std::env::var("COCOG_RASTER_BLOCK").as_deref() {
         Ok("8") => 8,
         _ => 16,

@@ -458,6 +458,14 @@ fn tempfile_dir(scene_dir: &Path) -> Result<tempfile::TempDir, StageError> {
         .map_err(|e| StageError::io(scene_dir, e))
 }
 
+/// The tensor-core block layout F's products use (`COCOG_COOP_BLOCK`, else the default).
+fn coop_block_name() -> String {
+    std::env::var("COCOG_COOP_BLOCK")
+        .ok()
+        .filter(|n| cocog_engine::CoopBlock::named(n).is_some())
+        .unwrap_or_else(|| cocog_engine::CoopBlock::NAMED[0].0.to_owned())
+}
+
 impl BenchReport {
     /// A few aligned lines for a terminal.
     pub fn table(&self) -> String {
@@ -467,9 +475,10 @@ impl BenchReport {
             let path = match cocog_engine::nn::ConvPath::from_env() {
                 cocog_engine::nn::ConvPath::Gemm => "implicit GEMMs",
                 cocog_engine::nn::ConvPath::Tiled => "tiled (COCOG_F_CONV=tiled)",
-                cocog_engine::nn::ConvPath::Coop if self.cooperative_f16 => {
-                    "implicit GEMMs on tensor cores (COCOG_F_CONV=coop)"
-                }
+                cocog_engine::nn::ConvPath::Coop if self.cooperative_f16 => &format!(
+                    "implicit GEMMs on tensor cores (COCOG_F_CONV=coop, block {})",
+                    coop_block_name()
+                ),
                 cocog_engine::nn::ConvPath::Coop => {
                     "implicit GEMMs (COCOG_F_CONV=coop asked, no cooperative matrices enabled)"
                 }
@@ -510,6 +519,7 @@ impl BenchReport {
              images           {} views at {}×{}{}\n\
              Gaussians        {} → {} (from iteration {})\n\
              method           {}\n\
+             compositing      {}\n\
              throughput       {:.2} it/s, {:.1} ms/iteration ({} iterations)\n\
              host ms/it       {:.2} recording | {:.2} in queue.submit\n\
              profiled ms/it   forward {:.1} | backward {:.1} | optimizer {:.1} | density {:.1}{} | sum {:.1}\n\
@@ -542,6 +552,11 @@ impl BenchReport {
             self.gaussians_end,
             self.start_iteration,
             self.method,
+            if cocog_engine::splat::raster_block_from_env() == 8 {
+                "8×8 blocks of each 16×16 tile (COCOG_RASTER_BLOCK=8)"
+            } else {
+                "16×16 tiles"
+            },
             self.it_per_s,
             self.ms_per_iteration,
             self.iterations,
