@@ -5,7 +5,7 @@ mod common;
 
 use cocog_engine::reference::{Gaussians64, raster_backward, render_backward};
 use cocog_engine::{Batch, Camera, GaussianParams, GpuContext, Renderer, View};
-use common::{gpu, random_scene, random_weights, test_camera};
+use common::{gpu, random_scene, random_weights, scenes_per_camera, test_camera, views_of};
 
 fn group_names(g: &GaussianParams) -> Vec<&'static str> {
     let n = g.len();
@@ -159,19 +159,8 @@ fn backward_compare_exchange_with_subgroups_matches_reference() {
 fn batched_backward_keeps_images_apart() {
     let Some(ctx) = gpu() else { return };
     let renderer = Renderer::new(ctx);
-    let cams: Vec<Camera> = (0..3)
-        .map(|i| test_camera(40, 33, -0.1 * f64::from(i)))
-        .collect();
-    let sets: Vec<GaussianParams> = (0..3)
-        .map(|i| random_scene(50, 1, 60 + i as u64, &cams[i]))
-        .collect();
-    let views: Vec<View<'_>> = (0..3)
-        .map(|i| View {
-            gaussians: &sets[i],
-            camera: &cams[i],
-            background: [0.5, 0.1 * i as f32, 0.2],
-        })
-        .collect();
+    let (cams, sets) = scenes_per_camera(3, (40, 33), -0.1, 1, |_| 50, 60);
+    let views = views_of(&cams, &sets, |i| [0.5, 0.1 * i as f32, 0.2]);
     check(ctx, &renderer, &views, 5);
 }
 
@@ -217,18 +206,7 @@ fn backward_in_8x8_blocks_matches_reference() {
         check_with(ctx, &renderer, &[view], seed + 100, depth);
     }
     let renderer = Renderer::new(ctx).with_raster_block(ctx, 8);
-    let cams: Vec<Camera> = (0..2)
-        .map(|i| test_camera(45, 37, 0.1 * f64::from(i)))
-        .collect();
-    let sets: Vec<GaussianParams> = (0..2)
-        .map(|i| random_scene(50, 2, 70 + i as u64, &cams[i]))
-        .collect();
-    let views: Vec<View<'_>> = (0..2)
-        .map(|i| View {
-            gaussians: &sets[i],
-            camera: &cams[i],
-            background: [0.1, 0.3 * i as f32, 0.6],
-        })
-        .collect();
+    let (cams, sets) = scenes_per_camera(2, (45, 37), 0.1, 2, |_| 50, 70);
+    let views = views_of(&cams, &sets, |i| [0.1, 0.3 * i as f32, 0.6]);
     check(ctx, &renderer, &views, 41);
 }

@@ -9,30 +9,7 @@ mod common;
 use cocog_engine::{
     CoopBlock, CoopFragments, Gemm, GemmLayout, GemmShape, GemmTile, OperandScales, Workspace,
 };
-use common::{Rng, gpu, run_gemm};
-
-/// C = A·B of A (M×K) and B (K×N), each stored contiguous along K or not as the layout says;
-/// with split K, summed over the batches too. C is row-major.
-fn plain(layout: GemmLayout) -> String {
-    let a = if layout.a_k_fast {
-        "a[(bt * gemm.m + m) * gemm.k + k]"
-    } else {
-        "a[(bt * gemm.k + k) * gemm.m + m]"
-    };
-    let b = if layout.b_k_fast {
-        "b[(bt * gemm.n + n) * gemm.k + k]"
-    } else {
-        "b[(bt * gemm.k + k) * gemm.n + n]"
-    };
-    format!(
-        "@group(0) @binding(2) var<storage, read> a: array<f32>;\n\
-         @group(0) @binding(3) var<storage, read> b: array<f32>;\n\
-         @group(0) @binding(4) var<storage, read_write> c: array<f32>;\n\
-         fn load_a(bt: u32, m: u32, k: u32) -> f32 {{ return {a}; }}\n\
-         fn load_b(bt: u32, k: u32, n: u32) -> f32 {{ return {b}; }}\n\
-         fn epilogue(bt: u32, m: u32, n: u32, v: f32) {{ c[(bt * gemm.m + m) * gemm.n + n] = v; }}\n"
-    )
-}
+use common::{Rng, gpu, plain_gemm_problem, run_gemm};
 
 /// Prints why the test does not run; fails instead where it was asked for
 /// (`COCOG_COOPERATIVE_MATRIX=1`) on an adapter that offers what the kernel needs, so a context
@@ -107,8 +84,15 @@ fn product_matches_f64(ctx: &cocog_engine::GpuContext, name: &str, block: CoopBl
             tile: GemmTile::SQUARE,
         };
         let scales = OperandScales { a: 4.0, b: 0.5 };
-        let gemm = Gemm::cooperative_with(ctx, "coop test", &plain(layout), layout, scales, block)
-            .expect("cooperative matrices enabled");
+        let gemm = Gemm::cooperative_with(
+            ctx,
+            "coop test",
+            &plain_gemm_problem(layout, 0.0),
+            layout,
+            scales,
+            block,
+        )
+        .expect("cooperative matrices enabled");
         let mut rng = Rng::new(7);
         // f16-representable inputs, so the f64 product sees what the tensor cores multiply.
         let mut half = |len: usize| -> Vec<f32> {

@@ -4,7 +4,7 @@ mod common;
 
 use cocog_engine::reference::{Gaussians64, render};
 use cocog_engine::{Batch, Camera, GaussianParams, Renderer, View};
-use common::{gpu, random_scene, test_camera};
+use common::{gpu, random_scene, scenes_per_camera, test_camera, views_of};
 
 /// Renders `views` in one GPU batch and compares every image with the reference.
 fn compare(views: &[View<'_>]) {
@@ -100,19 +100,10 @@ fn forward_matches_reference_every_sh_degree() {
 fn batch_renders_separate_images_in_one_launch() {
     // Different Gaussian sets, cameras and backgrounds per image, and an odd size so tiles
     // are partial on both axes.
-    let cams: Vec<Camera> = (0..3)
-        .map(|i| test_camera(50, 37, 0.1 * f64::from(i)))
-        .collect();
-    let sets: Vec<GaussianParams> = (0..3)
-        .map(|i| random_scene(90 + 10 * i, 2, 7 + i as u64, &cams[i]))
-        .collect();
-    let views: Vec<View<'_>> = (0..3)
-        .map(|i| View {
-            gaussians: &sets[i],
-            camera: &cams[i],
-            background: [0.2 * i as f32, 0.5, 1.0 - 0.3 * i as f32],
-        })
-        .collect();
+    let (cams, sets) = scenes_per_camera(3, (50, 37), 0.1, 2, |i| 90 + 10 * i, 7);
+    let views = views_of(&cams, &sets, |i| {
+        [0.2 * i as f32, 0.5, 1.0 - 0.3 * i as f32]
+    });
     compare(&views);
 }
 
@@ -149,13 +140,19 @@ fn mostly_culled_scene_matches_reference() {
     );
 }
 
-#[test]
-fn dense_scene_hits_early_termination() {
+/// 400 near-opaque Gaussians before a 64×48 camera: most pixels' transmittance runs out.
+fn dense_scene() -> (GaussianParams, Camera) {
     let cam = test_camera(64, 48, 0.0);
     let mut g = random_scene(400, 1, 5, &cam);
     for o in &mut g.opacity_logits {
         *o += 3.0;
     }
+    (g, cam)
+}
+
+#[test]
+fn dense_scene_hits_early_termination() {
+    let (g, cam) = dense_scene();
     let opaque = render(&Gaussians64::from(&g), &cam, [1.0; 3])
         .alpha
         .iter()
@@ -211,25 +208,13 @@ fn tile_culling_drops_intersections_without_changing_pixels() {
 /// are multiples of neither 8 nor 16, then a dense scene where blocks stop early.
 #[test]
 fn eight_by_eight_blocks_match_reference() {
-    let cams: Vec<Camera> = (0..2)
-        .map(|i| test_camera(45, 37, 0.1 * f64::from(i)))
-        .collect();
-    let sets: Vec<GaussianParams> = (0..2)
-        .map(|i| random_scene(60, 2, 80 + i as u64, &cams[i]))
-        .collect();
-    let views: Vec<View<'_>> = (0..2)
-        .map(|i| View {
-            gaussians: &sets[i],
-            camera: &cams[i],
-            background: [0.2, 0.5, 0.3 * i as f32],
-        })
-        .collect();
-    compare_in_blocks(&views, 0.5, 8);
-    let cam = test_camera(64, 48, 0.0);
-    let mut g = random_scene(400, 1, 5, &cam);
-    for o in &mut g.opacity_logits {
-        *o += 3.0;
-    }
+    let (cams, sets) = scenes_per_camera(2, (45, 37), 0.1, 2, |_| 60, 80);
+    compare_in_blocks(
+        &views_of(&cams, &sets, |i| [0.2, 0.5, 0.3 * i as f32]),
+        0.5,
+        8,
+    );
+    let (g, cam) = dense_scene();
     compare_in_blocks(
         &[View {
             gaussians: &g,

@@ -4,32 +4,10 @@
 mod common;
 
 use cocog_engine::{Gemm, GemmLayout, GemmShape, GemmTile};
-use common::{Rng, gpu, run_gemm};
+use common::{Rng, gpu, plain_gemm_problem, run_gemm};
 
-/// A problem over plain matrices, `batches` of them: A is M×K, B is K×N, stored row-major or
-/// transposed as the layout says; C = A·B + 0.5 lands row-major in `c` (the epilogue's offset
-/// proves it runs once per value, after any split reduction). Split K sums every batch into
-/// one C.
-fn problem(layout: GemmLayout) -> String {
-    let a = if layout.a_k_fast {
-        "a[(bt * gemm.m + m) * gemm.k + k]"
-    } else {
-        "a[(bt * gemm.k + k) * gemm.m + m]"
-    };
-    let b = if layout.b_k_fast {
-        "b[(bt * gemm.n + n) * gemm.k + k]"
-    } else {
-        "b[(bt * gemm.k + k) * gemm.n + n]"
-    };
-    format!(
-        "@group(0) @binding(2) var<storage, read> a: array<f32>;\n\
-         @group(0) @binding(3) var<storage, read> b: array<f32>;\n\
-         @group(0) @binding(4) var<storage, read_write> c: array<f32>;\n\
-         fn load_a(bt: u32, m: u32, k: u32) -> f32 {{ return {a}; }}\n\
-         fn load_b(bt: u32, k: u32, n: u32) -> f32 {{ return {b}; }}\n\
-         fn epilogue(bt: u32, m: u32, n: u32, v: f32) {{ c[(bt * gemm.m + m) * gemm.n + n] = v + 0.5; }}\n"
-    )
-}
+/// The epilogue's offset (0.5) proves it runs once per value, after any split reduction.
+const OFFSET: f32 = 0.5;
 
 fn check(layout: GemmLayout, m: usize, n: usize, k: usize, batches: usize, seed: u64) {
     let Some(ctx) = gpu() else { return };
@@ -54,7 +32,12 @@ fn check(layout: GemmLayout, m: usize, n: usize, k: usize, batches: usize, seed:
             b[(bt * k + kk) * n + j]
         })
     };
-    let gemm = Gemm::new(ctx, "test gemm", &problem(layout), layout);
+    let gemm = Gemm::new(
+        ctx,
+        "test gemm",
+        &plain_gemm_problem(layout, OFFSET),
+        layout,
+    );
     let outputs = if layout.split_k { 1 } else { batches };
     let shape = GemmShape {
         m: m as u32,

@@ -1,7 +1,7 @@
 //! Shared helpers for the engine's integration tests: a seeded RNG, tiny scenes, cameras.
 #![allow(dead_code)]
 
-use cocog_engine::{Camera, GaussianParams, sh_coeffs_per_channel};
+use cocog_engine::{Camera, GaussianParams, View, sh_coeffs_per_channel};
 
 /// cocog's seeded generator with the ranges the tests draw from.
 pub struct Rng(cocog_formats::rng::SplitMix64);
@@ -118,4 +118,62 @@ pub fn run_gemm(
     gemm.encode(&mut rec, &mut ws, shape, &[(2, &ga), (3, &gb), (4, &gc)]);
     rec.submit();
     ctx.read(&gc, len).expect("read C")
+}
+
+/// `frames` cameras of `width`×`height`, each yawed `yaw_step` from the last, and in front of
+/// camera i a random scene of `count(i)` Gaussians at SH `degree` from seed `seed + i`.
+pub fn scenes_per_camera(
+    frames: usize,
+    (width, height): (u32, u32),
+    yaw_step: f64,
+    degree: u32,
+    count: impl Fn(usize) -> usize,
+    seed: u64,
+) -> (Vec<Camera>, Vec<GaussianParams>) {
+    let cams: Vec<Camera> = (0..frames)
+        .map(|i| test_camera(width, height, yaw_step * i as f64))
+        .collect();
+    let sets = (0..frames)
+        .map(|i| random_scene(count(i), degree, seed + i as u64, &cams[i]))
+        .collect();
+    (cams, sets)
+}
+
+/// One view per camera and its scene, on background `background(i)`.
+pub fn views_of<'a>(
+    cams: &'a [Camera],
+    sets: &'a [GaussianParams],
+    background: impl Fn(usize) -> [f32; 3],
+) -> Vec<View<'a>> {
+    (0..cams.len())
+        .map(|i| View {
+            gaussians: &sets[i],
+            camera: &cams[i],
+            background: background(i),
+        })
+        .collect()
+}
+
+/// A plain product's problem for the GEMM kernels: A (M×K) and B (K×N), each stored contiguous
+/// along K or not as `layout` says, bound at 2 and 3; C = A·B + `offset` lands row-major at 4.
+/// With split K every batch sums into one C.
+pub fn plain_gemm_problem(layout: cocog_engine::GemmLayout, offset: f32) -> String {
+    let a = if layout.a_k_fast {
+        "a[(bt * gemm.m + m) * gemm.k + k]"
+    } else {
+        "a[(bt * gemm.k + k) * gemm.m + m]"
+    };
+    let b = if layout.b_k_fast {
+        "b[(bt * gemm.n + n) * gemm.k + k]"
+    } else {
+        "b[(bt * gemm.k + k) * gemm.n + n]"
+    };
+    format!(
+        "@group(0) @binding(2) var<storage, read> a: array<f32>;\n\
+         @group(0) @binding(3) var<storage, read> b: array<f32>;\n\
+         @group(0) @binding(4) var<storage, read_write> c: array<f32>;\n\
+         fn load_a(bt: u32, m: u32, k: u32) -> f32 {{ return {a}; }}\n\
+         fn load_b(bt: u32, k: u32, n: u32) -> f32 {{ return {b}; }}\n\
+         fn epilogue(bt: u32, m: u32, n: u32, v: f32) {{ c[(bt * gemm.m + m) * gemm.n + n] = v + {offset:?}; }}\n"
+    )
 }
