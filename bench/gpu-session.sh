@@ -24,7 +24,8 @@
 #                   in f32 (COCOG_NO_F16=1) as well as f16, with the per-kernel split
 #                   (--kernels), and on tensor cores (COCOG_F_CONV=coop, f16 operands,
 #                   experimental), and both steps compositing in 8×8 blocks
-#                   (COCOG_RASTER_BLOCK=8); the 3dgs step (both blocks) and the cocog step at 400×300 on the same
+#                   (COCOG_RASTER_BLOCK=8) or with the backward's tile lists split
+#                   (COCOG_RASTER_SPLIT=auto); the 3dgs step (each of those, and 4 chunks) and the cocog step at 400×300 on the same
 #                   Gaussians, F on the f32 products and on tensor cores in every block layout
 #                   (COCOG_COOP_BLOCK; what a step of #12's full-size gate costs); then, where
 #                   DEV has gemm-bench (`cargo bench --bench gemm --no-run`, stripped), F's 3×3
@@ -37,6 +38,8 @@
 #   peer-train      #11: sharp-dev at 400×300, 30000 iterations: `cocog train --method 3dgs`
 #                   (timed without evaluations or checkpoints) and `cocog eval`, then gsplat on
 #                   the same views (peer_gsplat.py train)                          ~250 s + gsplat build
+#   train-split     peer-train's cocog run with the backward's tile lists split
+#                   (COCOG_RASTER_SPLIT, default auto), then `cocog eval`           ~80 s
 #   idle-bench      `cocog bench` rows of sharp-dev at 100×75 and 1M random Gaussians at 1080p
 #   tests           the GPU test executables (f64 references, finite differences)      ~55 s
 #                   (TESTS="NAME ..." runs only those; gpu_coop_gemm alone takes seconds)
@@ -118,7 +121,7 @@ phase_step() {
     bounded 120 "$cocog" train "$work/in-dev-table" -o "$model" --downscale 4 --method 3dgs \
         --iterations 5000 --checkpoint-every 0 -q --force >>"$log" 2>&1
     local m vars
-    for m in 3dgs cocog cocog-tiled cocog-f32 cocog-coop 3dgs-b8 cocog-b8; do
+    for m in 3dgs cocog cocog-tiled cocog-f32 cocog-coop 3dgs-b8 cocog-b8 3dgs-split cocog-split; do
         echo "-- $m step on the model's Gaussians" >>"$log"
         vars=(COCOG_F_CONV=gemm)
         [[ $m == *-tiled ]] && vars=(COCOG_F_CONV=tiled)
@@ -126,6 +129,8 @@ phase_step() {
         [[ $m == *-f32 ]] && vars+=(COCOG_NO_F16=1)
         # Compositing in 8×8 blocks of a tile (four times the workgroups on a 100×75 frame).
         [[ $m == *-b8 ]] && vars+=(COCOG_RASTER_BLOCK=8)
+        # The compositing backward walking each tile's list in chunks (RasterSplit::Auto).
+        [[ $m == *-split ]] && vars+=(COCOG_RASTER_SPLIT=auto)
         bounded 60 env "${vars[@]}" "$cocog" bench "$work/in-dev-table" --downscale 4 \
             --resume "$model" --method "${m%%-*}" --iterations 100 --warmup 10 --kernels \
             >>"$log" 2>&1
@@ -133,9 +138,10 @@ phase_step() {
     # The same Gaussians at full size (400×300): what a step of #12's full-size gate costs,
     # against the 3dgs step there, on the f32 products and on tensor cores in every block
     # layout (CoopBlock).
-    for b in 16 8; do
-        echo "-- 3dgs step at 400×300 on the model's Gaussians, COCOG_RASTER_BLOCK=$b" >>"$log"
-        bounded 60 env COCOG_RASTER_BLOCK=$b "$cocog" bench "$work/in-dev-table" --downscale 1 \
+    local c
+    for c in "${raster_settings[@]}"; do
+        echo "-- 3dgs step at 400×300 on the model's Gaussians, $c" >>"$log"
+        bounded 60 env $c "$cocog" bench "$work/in-dev-table" --downscale 1 \
             --resume "$model" --method 3dgs --iterations 100 --warmup 10 --kernels >>"$log" 2>&1
     done
     for m in gemm:4x4 coop:4x4 coop:4x8 coop:4x16 coop:4x8k4 coop:8x8 coop:4x4p coop:4x8p; do
@@ -165,23 +171,41 @@ phase_peer_synthetic() {
         --out "$results/gsplat-synthetic.json" --iterations 20 --warmup 5 >>"$log" 2>&1
 }
 
-phase_peer_train() {
-    local out="$work/peer-cocog-sharp-dev" t0=$SECONDS
+# The compositing settings the benches compare: 16×16 tiles, 8×8 blocks, and tile lists split
+# for the backward (as many chunks as RasterSplit::Auto picks, and 4).
+raster_settings=("COCOG_RASTER_BLOCK=16" "COCOG_RASTER_BLOCK=8" "COCOG_RASTER_SPLIT=auto"
+    "COCOG_RASTER_SPLIT=4")
+
+# cocog's side of peer-train: sharp-dev at 400×300, 30000 iterations of 3dgs, timed, then scored.
+train_sharp_dev() {
+    local out=$1 t0=$SECONDS
     bounded 400 "$cocog" train "$work/in-sharp-dev" -o "$out" --method 3dgs --iterations 30000 \
         --checkpoint-every 0 --force >>"$log" 2>&1
     echo "cocog train: $((SECONDS - t0)) s wall" >>"$log"
     bounded 60 "$cocog" eval "$out" >>"$log" 2>&1
+}
+
+phase_peer_train() {
+    local out="$work/peer-cocog-sharp-dev"
+    train_sharp_dev "$out"
     gsplat_ready && bounded 600 python3 "$root/bench/peer_gsplat.py" train "$work/in-sharp-dev" \
         --out "$results/gsplat-sharp-dev" --iterations 30000 >>"$log" 2>&1
     rm -f "$results"/gsplat-sharp-dev/renders/*.png
-    # After the peer, which the phase is for: the 3dgs step at the run's end, compositing in
-    # 16×16 tiles and in 8×8 blocks.
-    local b
-    for b in 16 8; do
-        echo "-- 3dgs step on the trained model, COCOG_RASTER_BLOCK=$b" >>"$log"
-        bounded 20 env COCOG_RASTER_BLOCK=$b "$cocog" bench "$work/in-sharp-dev" --resume "$out" \
+    # After the peer, which the phase is for: the 3dgs step at the run's end in each
+    # compositing setting.
+    local c
+    for c in "${raster_settings[@]}"; do
+        echo "-- 3dgs step on the trained model, $c" >>"$log"
+        bounded 20 env $c "$cocog" bench "$work/in-sharp-dev" --resume "$out" \
             --method 3dgs --iterations 200 --warmup 20 --kernels >>"$log" 2>&1
     done
+}
+
+# peer-train's cocog run again with the backward's tile lists split (COCOG_RASTER_SPLIT, auto
+# unless set), for #11's figure once peer-train's benches show the split faster; gsplat's side
+# is peer-train's.
+phase_train_split() {
+    COCOG_RASTER_SPLIT="${COCOG_RASTER_SPLIT:-auto}" train_sharp_dev "$work/split-sharp-dev"
 }
 
 phase_idle_bench() {
@@ -224,6 +248,7 @@ while ((i < ${#phases[@]})); do
         step) run_phase step 120 ;;
         peer-synthetic) run_phase peer-synthetic 165 ;;
         peer-train) run_phase peer-train 360 ;;
+        train-split) run_phase train-split 120 ;;
         idle-bench) run_phase idle-bench 120 ;;
         tests) run_phase tests 90 ;;
         gates)

@@ -4,7 +4,7 @@
 mod common;
 
 use cocog_engine::reference::{Gaussians64, raster_backward, render_backward};
-use cocog_engine::{Batch, Camera, GaussianParams, GpuContext, Renderer, View};
+use cocog_engine::{Batch, Camera, GaussianParams, GpuContext, RasterSplit, Renderer, View};
 use common::{gpu, random_scene, random_weights, scenes_per_camera, test_camera, views_of};
 
 fn group_names(g: &GaussianParams) -> Vec<&'static str> {
@@ -209,4 +209,44 @@ fn backward_in_8x8_blocks_matches_reference() {
     let (cams, sets) = scenes_per_camera(2, (45, 37), 0.1, 2, |_| 50, 70);
     let views = views_of(&cams, &sets, |i| [0.1, 0.3 * i as f32, 0.6]);
     check(ctx, &renderer, &views, 41);
+}
+
+/// The backward with each tile's list walked in chunks, a workgroup each
+/// (`with_raster_split`): chunks of a few Gaussians, so most pixels start a chunk from the
+/// state the forward recorded at its end; both accumulation paths, with and without depth, in
+/// 16×16 tiles and 8×8 blocks; then a dense scene whose pixels run out of transmittance before,
+/// inside and after chunk boundaries, and a batch of frames split as `Auto` splits them.
+#[test]
+fn backward_in_chunks_matches_reference() {
+    let Some(ctx) = gpu() else { return };
+    for (renderer, split, seed, depth) in [
+        (Renderer::new(ctx), 2, 51, true),
+        (Renderer::new(ctx), 5, 52, false),
+        (Renderer::with_options(ctx, false, false), 3, 53, true),
+        (Renderer::new(ctx).with_raster_block(ctx, 8), 4, 54, true),
+    ] {
+        let renderer = renderer.with_raster_split(RasterSplit::Fixed(split));
+        let (g, cam) = one_image(3, 60, seed);
+        let view = View {
+            gaussians: &g,
+            camera: &cam,
+            background: [0.6, 0.3, 0.2],
+        };
+        check_with(ctx, &renderer, &[view], seed + 100, depth);
+    }
+    let renderer = Renderer::new(ctx).with_raster_split(RasterSplit::Fixed(7));
+    let (mut g, cam) = one_image(1, 300, 55);
+    for o in &mut g.opacity_logits {
+        *o += 3.0;
+    }
+    let view = View {
+        gaussians: &g,
+        camera: &cam,
+        background: [1.0, 1.0, 1.0],
+    };
+    check(ctx, &renderer, &[view], 155);
+    let renderer = Renderer::new(ctx).with_raster_split(RasterSplit::Auto);
+    let (cams, sets) = scenes_per_camera(2, (45, 37), 0.1, 2, |_| 50, 70);
+    let views = views_of(&cams, &sets, |i| [0.1, 0.3 * i as f32, 0.6]);
+    check(ctx, &renderer, &views, 56);
 }

@@ -3,7 +3,7 @@
 mod common;
 
 use cocog_engine::reference::{Gaussians64, render};
-use cocog_engine::{Batch, Camera, GaussianParams, Renderer, View};
+use cocog_engine::{Batch, Camera, GaussianParams, RasterSplit, Renderer, View};
 use common::{gpu, random_scene, scenes_per_camera, test_camera, views_of};
 
 /// Renders `views` in one GPU batch and compares every image with the reference.
@@ -224,4 +224,35 @@ fn eight_by_eight_blocks_match_reference() {
         0.5,
         8,
     );
+}
+
+/// Splitting the backward's tile lists (`with_raster_split`) only makes the forward record
+/// where each chunk starts: its pixels stay bit for bit those of the unsplit forward, on a dense
+/// scene where pixels stop early and on a batch of frames.
+#[test]
+fn split_lists_leave_the_forward_unchanged() {
+    let Some(ctx) = gpu() else { return };
+    let (g, cam) = dense_scene();
+    let dense = [View {
+        gaussians: &g,
+        camera: &cam,
+        background: [1.0, 1.0, 1.0],
+    }];
+    let (cams, sets) = scenes_per_camera(2, (45, 37), 0.1, 2, |_| 60, 80);
+    let batch_views = views_of(&cams, &sets, |i| [0.2, 0.5, 0.3 * i as f32]);
+    for views in [&dense[..], &batch_views[..]] {
+        let batch = Batch::from_views(ctx, views).unwrap();
+        let render = |split| {
+            let renderer = Renderer::new(ctx).with_raster_split(split);
+            let state = renderer.forward(ctx, &batch).unwrap();
+            state.read_images(ctx, &batch).unwrap()
+        };
+        let whole = render(RasterSplit::Fixed(1));
+        for split in [RasterSplit::Fixed(6), RasterSplit::Auto] {
+            assert!(
+                render(split) == whole,
+                "{split:?} changed the forward's pixels"
+            );
+        }
+    }
 }

@@ -10,5 +10,8 @@ pub use batch::{
     Batch, Crop, ImageSpec, ParamBuffers, bytes_per_gaussian, check_fits, check_fits_at,
 };
 pub use frame::Frame;
-pub use renderer::{QUAT_TO_ROT_WGSL, Renderer, raster_block_from_env};
+pub use renderer::{
+    MAX_SPLIT, QUAT_TO_ROT_WGSL, RasterSplit, Renderer, SPLIT_TARGET, raster_block_from_env,
+    raster_split_from_env,
+};
 pub use state::{ForwardState, Gradients, RenderedImage};

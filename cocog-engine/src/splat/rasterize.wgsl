@@ -2,12 +2,20 @@
 // from the host) and image, one thread per pixel. Each batch of up to SUB² projected Gaussians
 // of the tile's list is staged in shared memory by all threads; the workgroup stops once every
 // pixel's transmittance has run out. A pixel's result does not depend on SUB.
+// With `splits` S > 1 the backward walks each tile's list in S chunks, each its own workgroup:
+// one long list would otherwise be one workgroup's serial walk while the GPU idles. So each
+// pixel records what the backward of a chunk starts from: at every chunk boundary it reached
+// still compositing, the transmittance and the colour and depth in front (slot k − 1 for
+// boundary k), and at the end its final ones (slot S − 1).
 
 struct Params {
     width: u32,
     height: u32,
     tiles_x: u32,
     tiles_y: u32,
+    // Pixels of every image: the stride of a chunk slot.
+    pixels: u32,
+    splits: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -19,6 +27,9 @@ struct Params {
 @group(0) @binding(6) var<storage, read_write> out_depth: array<f32>;
 @group(0) @binding(7) var<storage, read_write> out_t: array<f32>;
 @group(0) @binding(8) var<storage, read_write> out_last: array<u32>;
+// [slot][pixel]: (colour in front, transmittance), and depth in front.
+@group(0) @binding(9) var<storage, read_write> chunk_state: array<vec4<f32>>;
+@group(0) @binding(10) var<storage, read_write> chunk_depth: array<f32>;
 
 const BATCH: u32 = SUB * SUB;
 // Blocks per tile side.
@@ -46,6 +57,14 @@ fn rasterize(
     let inside = px < params.width && py < params.height;
     let centre = vec2<f32>(f32(px) + 0.5, f32(py) + 0.5);
     let range = ranges[tile];
+    let pix = (image * params.height + py) * params.width + px;
+    // Chunks of `chunk` Gaussians (the backward's split); no boundary when unsplit.
+    let chunk = (range.y - range.x + params.splits - 1u) / params.splits;
+    var boundary = 0xffffffffu;
+    if (params.splits > 1u && inside) {
+        boundary = range.x + chunk;
+    }
+    var slot = 0u;
 
     if (tid == 0u) {
         atomicStore(&done_count, 0u);
@@ -79,6 +98,12 @@ fn rasterize(
         workgroupBarrier();
         let n = min(BATCH, range.y - start);
         for (var j = 0u; j < n && !done; j++) {
+            if (start + j == boundary) {
+                chunk_state[slot * params.pixels + pix] = vec4<f32>(color, t);
+                chunk_depth[slot * params.pixels + pix] = depth;
+                slot += 1u;
+                boundary += chunk;
+            }
             let a = batch_a[j];
             let conic = batch_b[j].xyz;
             let d = a.xy - centre;
@@ -104,7 +129,11 @@ fn rasterize(
         }
     }
     if (inside) {
-        let pix = (image * params.height + py) * params.width + px;
+        if (params.splits > 1u) {
+            let last_slot = (params.splits - 1u) * params.pixels + pix;
+            chunk_state[last_slot] = vec4<f32>(color, t);
+            chunk_depth[last_slot] = depth;
+        }
         out_rgba[pix] = vec4<f32>(color + t * backgrounds[image].xyz, 1.0 - t);
         out_depth[pix] = depth;
         out_t[pix] = t;

@@ -11,12 +11,18 @@
 // own last Gaussian, or its subgroup's (so the subgroup stays in step for the sums). The host also prepends `DEPTH_GRAD` and `depth_grad`:
 // the binding of `v_depth` (slot 8) where a loss needs depth, or a constant 0 that compiles the
 // depth channel out (no read, no compositing of depth, one atomic fewer per Gaussian).
+// With `splits` S > 1, workgroup z = image × S + c walks only chunk c of its tile's list (the
+// forward's split, rasterize.wgsl): a pixel that composited past the chunk starts from the
+// transmittance the forward recorded at the chunk's end, and from what lies behind it, its
+// final colour and depth less those in front of that boundary.
 
 struct Params {
     width: u32,
     height: u32,
     tiles_x: u32,
     tiles_y: u32,
+    pixels: u32,
+    splits: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -27,6 +33,8 @@ struct Params {
 @group(0) @binding(5) var<storage, read> out_t: array<f32>;
 @group(0) @binding(6) var<storage, read> out_last: array<u32>;
 @group(0) @binding(7) var<storage, read> v_rgba: array<vec4<f32>>;
+@group(0) @binding(10) var<storage, read> chunk_state: array<vec4<f32>>;
+@group(0) @binding(11) var<storage, read> chunk_depth: array<f32>;
 
 const BATCH: u32 = SUB * SUB;
 // Blocks per tile side.
@@ -50,7 +58,8 @@ fn rasterize_backward(
     // SUBGROUP_PARAM
 ) {
     let lid = vec2<u32>(tid % SUB, tid / SUB);
-    let image = wid.z;
+    let image = wid.z / params.splits;
+    let part = wid.z % params.splits;
     let tile = (image * params.tiles_y + wid.y / PER_TILE) * params.tiles_x + wid.x / PER_TILE;
     let px = wid.x * SUB + lid.x;
     let py = wid.y * SUB + lid.y;
@@ -58,6 +67,9 @@ fn rasterize_backward(
     let centre = vec2<f32>(f32(px) + 0.5, f32(py) + 0.5);
     let range = ranges[tile];
     let pix = (image * params.height + py) * params.width + px;
+    let chunk = (range.y - range.x + params.splits - 1u) / params.splits;
+    let chunk_begin = min(range.y, range.x + part * chunk);
+    let chunk_end = min(range.y, chunk_begin + chunk);
 
     var t_final = 1.0;
     var last = range.x;
@@ -69,6 +81,18 @@ fn rasterize_backward(
         v_out = v_rgba[pix];
         v_d = depth_grad(pix);
     }
+    var t = t_final;
+    var behind = t_final * backgrounds[image].xyz;
+    var behind_depth = 0.0;
+    if (inside && last > chunk_end) {
+        // Only when split: unsplit, the one chunk ends with the list.
+        let at = part * params.pixels + pix;
+        let fin = (params.splits - 1u) * params.pixels + pix;
+        let front = chunk_state[at];
+        t = front.w;
+        behind += chunk_state[fin].xyz - front.xyz;
+        behind_depth = chunk_depth[fin] - chunk_depth[at];
+    }
     if (tid == 0u) {
         atomicStore(&tile_end, range.x);
     }
@@ -78,17 +102,15 @@ fn rasterize_backward(
     if (tid == 0u) {
         tile_end_snapshot = atomicLoad(&tile_end);
     }
-    let end = workgroupUniformLoad(&tile_end_snapshot);
+    // This chunk's part of the Gaussians some pixel of the block composited.
+    let end = max(chunk_begin, min(chunk_end, workgroupUniformLoad(&tile_end_snapshot)));
 
     let my_end = walk_end(last);
-    var t = t_final;
-    var behind = t_final * backgrounds[image].xyz;
-    var behind_depth = 0.0;
-    let num_batches = (end - range.x + BATCH - 1u) / BATCH;
+    let num_batches = (end - chunk_begin + BATCH - 1u) / BATCH;
     for (var b = 0u; b < num_batches; b++) {
         workgroupBarrier();
         let batch_end = end - b * BATCH;
-        let batch_start = max(range.x, batch_end - min(batch_end, BATCH));
+        let batch_start = max(chunk_begin, batch_end - min(batch_end, BATCH));
         if (batch_start + tid < batch_end) {
             let g = tile_values[batch_start + tid];
             batch_id[tid] = g;

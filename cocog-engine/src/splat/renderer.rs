@@ -44,6 +44,9 @@ struct RasterParams {
     height: u32,
     tiles_x: u32,
     tiles_y: u32,
+    pixels: u32,
+    splits: u32,
+    pad: [u32; 2],
 }
 
 /// Compiled pipelines of the engine; build once per device and reuse.
@@ -69,6 +72,38 @@ pub struct Renderer {
     /// The compositing forward's and backward's workgroup: a `raster_block`² block of a 16×16
     /// tile.
     raster_block: u32,
+    /// How many chunks the compositing backward splits each tile's list into.
+    raster_split: RasterSplit,
+}
+
+/// How many workgroups walk each tile's list in the compositing backward, each a chunk of it
+/// (the forward records where each chunk starts). One long list is otherwise one workgroup's
+/// serial walk, and a small frame has too few tiles to fill a GPU.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RasterSplit {
+    /// This many chunks per tile (1: unsplit).
+    Fixed(u32),
+    /// Enough chunks that a frame's backward has about `SPLIT_TARGET` workgroups, at most
+    /// `MAX_SPLIT`.
+    Auto,
+}
+
+/// Workgroups `RasterSplit::Auto` aims a compositing backward at.
+pub const SPLIT_TARGET: u32 = 2048;
+/// Most chunks per tile list.
+pub const MAX_SPLIT: u32 = 16;
+
+/// `COCOG_RASTER_SPLIT=N` (1 to `MAX_SPLIT`) or `auto` splits the compositing backward's tile
+/// lists (experimental, untimed on a GPU); unset or anything else leaves them whole.
+pub fn raster_split_from_env() -> RasterSplit {
+    match std::env::var("COCOG_RASTER_SPLIT").as_deref() {
+        Ok("auto") => RasterSplit::Auto,
+        Ok(n) => match n.parse::<u32>() {
+            Ok(n) if (1..=MAX_SPLIT).contains(&n) => RasterSplit::Fixed(n),
+            _ => RasterSplit::Fixed(1),
+        },
+        Err(_) => RasterSplit::Fixed(1),
+    }
 }
 
 fn groups(n: u32) -> u32 {
@@ -147,6 +182,7 @@ impl Renderer {
             rasterize_backward: Default::default(),
             binding_limit: None,
             raster_block: block,
+            raster_split: raster_split_from_env(),
         }
     }
 
@@ -181,14 +217,40 @@ impl Renderer {
         }
     }
 
-    fn raster_params(batch: &Batch) -> RasterParams {
+    fn raster_params(batch: &Batch, splits: u32) -> RasterParams {
         let (tiles_x, tiles_y) = batch.tiles();
         RasterParams {
             width: batch.width(),
             height: batch.height(),
             tiles_x,
             tiles_y,
+            // Below 2^32: every per-pixel buffer fits a binding.
+            pixels: batch.num_pixels() as u32,
+            splits,
+            pad: [0; 2],
         }
+    }
+
+    /// Chunks per tile list for `batch`: as asked, within what one binding of the chunk state
+    /// (16 bytes per pixel and chunk) and the grid's z (images × chunks) allow.
+    fn splits(&self, ctx: &GpuContext, batch: &Batch) -> u32 {
+        let (tiles_x, tiles_y) = batch.tiles();
+        let per_tile = 16 / self.raster_block;
+        let wanted = match self.raster_split {
+            RasterSplit::Fixed(n) => n,
+            RasterSplit::Auto => {
+                let groups = tiles_x * tiles_y * per_tile * per_tile * batch.num_images();
+                SPLIT_TARGET.div_ceil(groups.max(1))
+            }
+        };
+        let by_binding = self.binding_limit(ctx) / (16 * batch.num_pixels().max(1));
+        let by_grid =
+            ctx.device.limits().max_compute_workgroups_per_dimension / batch.num_images().max(1);
+        wanted
+            .min(MAX_SPLIT)
+            .min(u32::try_from(by_binding).unwrap_or(u32::MAX))
+            .min(by_grid)
+            .max(1)
     }
 
     /// Renders every image of `batch` into buffers of its own. Sizes the intersection
@@ -348,6 +410,9 @@ impl Renderer {
             groups(capacity),
         );
         let pixels = batch.num_pixels();
+        let splits = self.splits(ctx, batch);
+        // Unsplit, nothing reads the chunk state: a word each keeps the bindings valid.
+        let chunk_pixels = if splits > 1 { pixels } else { 1 };
         let state = ForwardState {
             rgba: ws.buffer(ctx, "rgba", pixels * 16),
             depth: ws.buffer(ctx, "depth", pixels * 4),
@@ -358,8 +423,11 @@ impl Renderer {
             tile_values: by_tile.values,
             status,
             num_intersections: capacity,
+            splits,
+            chunk_state: ws.buffer(ctx, "chunk state", chunk_pixels * 16 * u64::from(splits)),
+            chunk_depth: ws.buffer(ctx, "chunk depth", chunk_pixels * 4 * u64::from(splits)),
         };
-        let raster = rec.uniform(&Self::raster_params(batch));
+        let raster = rec.uniform(&Self::raster_params(batch, splits));
         let per_tile = 16 / self.raster_block;
         self.rasterize.dispatch(
             rec,
@@ -373,6 +441,8 @@ impl Renderer {
                 (6, &state.depth),
                 (7, &state.final_t),
                 (8, &state.last),
+                (9, &state.chunk_state),
+                (10, &state.chunk_depth),
             ],
             [tiles_x * per_tile, tiles_y * per_tile, batch.num_images()],
         );
@@ -387,6 +457,18 @@ impl Renderer {
         self.rasterize = Self::rasterize_kernel(ctx, self.raster_block);
         self.rasterize_backward = Default::default();
         self
+    }
+
+    /// Splits the compositing backward's tile lists as `split` says, where the default
+    /// (`COCOG_RASTER_SPLIT`, else unsplit) is not wanted.
+    pub fn with_raster_split(mut self, split: RasterSplit) -> Self {
+        self.raster_split = split;
+        self
+    }
+
+    /// The compositing block's side and the list split, as set.
+    pub fn raster_setting(&self) -> (u32, RasterSplit) {
+        (self.raster_block, self.raster_split)
     }
 
     fn rasterize_kernel(ctx: &GpuContext, block: u32) -> Kernel {
@@ -462,7 +544,7 @@ impl Renderer {
         let (tiles_x, tiles_y) = batch.tiles();
         let v_proj = ws.zeroed(rec, "v_projected", u64::from(n) * 40);
         let grads = ParamBuffers::gradients_in(ctx, ws, &batch.params);
-        let raster = rec.uniform(&Self::raster_params(batch));
+        let raster = rec.uniform(&Self::raster_params(batch, state.splits));
         let globals = rec.uniform(&Self::globals(batch));
         let mut binds: Vec<(u32, &dyn Bind)> = vec![
             (0, &raster),
@@ -474,6 +556,8 @@ impl Renderer {
             (6, &state.last),
             (7, v_rgba),
             (9, &v_proj),
+            (10, &state.chunk_state),
+            (11, &state.chunk_depth),
         ];
         if let Some(v_depth) = v_depth {
             binds.push((8, v_depth));
@@ -482,7 +566,11 @@ impl Renderer {
         self.rasterize_backward(ctx, v_depth.is_some()).dispatch(
             rec,
             &binds,
-            [tiles_x * per_tile, tiles_y * per_tile, batch.num_images()],
+            [
+                tiles_x * per_tile,
+                tiles_y * per_tile,
+                batch.num_images() * state.splits,
+            ],
         );
         let p = &batch.params;
         self.project_backward.dispatch_1d(

@@ -25,6 +25,11 @@ pub struct ForwardState {
     /// (tile, Gaussian) pairs this pass composited from; exact after `Renderer::forward`,
     /// the capacity after `encode_forward` (the count is in `status`).
     pub num_intersections: u32,
+    /// Chunks per tile list the backward walks (`RasterSplit`), and where each starts: per
+    /// pixel, [slot][pixel] (colour in front, transmittance) and depth in front.
+    pub(crate) splits: u32,
+    pub(crate) chunk_state: GpuBuffer,
+    pub(crate) chunk_depth: GpuBuffer,
 }
 
 /// Output of `Renderer::backward`.

@@ -552,11 +552,7 @@ impl BenchReport {
             self.gaussians_end,
             self.start_iteration,
             self.method,
-            if cocog_engine::splat::raster_block_from_env() == 8 {
-                "8×8 blocks of each 16×16 tile (COCOG_RASTER_BLOCK=8)"
-            } else {
-                "16×16 tiles"
-            },
+            compositing_setting(),
             self.it_per_s,
             self.ms_per_iteration,
             self.iterations,
@@ -587,4 +583,26 @@ impl BenchReport {
 
 fn yes_no(b: bool) -> &'static str {
     if b { "yes" } else { "no" }
+}
+
+/// How the compositing forward and backward run, as the environment sets them.
+fn compositing_setting() -> String {
+    use cocog_engine::splat::{RasterSplit, raster_block_from_env, raster_split_from_env};
+    let block = if raster_block_from_env() == 8 {
+        "8×8 blocks of each 16×16 tile (COCOG_RASTER_BLOCK=8)"
+    } else {
+        "16×16 tiles"
+    };
+    let split = match raster_split_from_env() {
+        RasterSplit::Fixed(1) => "whole tile lists in the backward".to_owned(),
+        RasterSplit::Fixed(n) => {
+            format!("the backward walks each tile list in {n} chunks (COCOG_RASTER_SPLIT={n})")
+        }
+        RasterSplit::Auto => format!(
+            "the backward splits tile lists into chunks for about {} workgroups \
+             (COCOG_RASTER_SPLIT=auto)",
+            cocog_engine::splat::SPLIT_TARGET
+        ),
+    };
+    format!("{block}; {split}")
 }
