@@ -11,28 +11,53 @@
 @group(0) @binding(11) var<storage, read_write> v_opacity_logits: array<f32>;
 @group(0) @binding(12) var<storage, read_write> v_sh: array<f32>;
 
-fn sh_basis_grad(d: vec3<f32>, k: u32) -> vec3<f32> {
+// Coefficient k's gradients, given its basis value b and the basis's gradient db in the
+// direction: v_sh at `out` (the row's, as sh_coeff lays it out), and the return value, its share
+// of the gradient of the view direction.
+fn sh_term_backward(k: u32, b: f32, db: vec3<f32>, v_pre: vec3<f32>, out: u32, row: u32, n: u32) -> vec3<f32> {
+    v_sh[out + k] = v_pre.x * b;
+    v_sh[out + n + k] = v_pre.y * b;
+    v_sh[out + 2u * n + k] = v_pre.z * b;
+    return dot(v_pre, sh_coeff(row, n, k)) * db;
+}
+
+// sh_color's backward, term by term as it is: writes v_sh and returns the gradient of d.
+fn sh_backward(d: vec3<f32>, v_pre: vec3<f32>, out: u32, row: u32, n: u32) -> vec3<f32> {
     let x = d.x;
     let y = d.y;
     let z = d.z;
-    switch k {
-        case 1u: { return vec3<f32>(0.0, -SH_C1, 0.0); }
-        case 2u: { return vec3<f32>(0.0, 0.0, SH_C1); }
-        case 3u: { return vec3<f32>(-SH_C1, 0.0, 0.0); }
-        case 4u: { return SH_C2[0] * vec3<f32>(y, x, 0.0); }
-        case 5u: { return SH_C2[1] * vec3<f32>(0.0, z, y); }
-        case 6u: { return SH_C2[2] * vec3<f32>(-2.0 * x, -2.0 * y, 4.0 * z); }
-        case 7u: { return SH_C2[3] * vec3<f32>(z, 0.0, x); }
-        case 8u: { return SH_C2[4] * vec3<f32>(2.0 * x, -2.0 * y, 0.0); }
-        case 9u: { return SH_C3[0] * vec3<f32>(6.0 * x * y, 3.0 * x * x - 3.0 * y * y, 0.0); }
-        case 10u: { return SH_C3[1] * vec3<f32>(y * z, x * z, x * y); }
-        case 11u: { return SH_C3[2] * vec3<f32>(-2.0 * x * y, 4.0 * z * z - x * x - 3.0 * y * y, 8.0 * y * z); }
-        case 12u: { return SH_C3[3] * vec3<f32>(-6.0 * x * z, -6.0 * y * z, 6.0 * z * z - 3.0 * x * x - 3.0 * y * y); }
-        case 13u: { return SH_C3[4] * vec3<f32>(4.0 * z * z - 3.0 * x * x - y * y, -2.0 * x * y, 8.0 * x * z); }
-        case 14u: { return SH_C3[5] * vec3<f32>(2.0 * x * z, -2.0 * y * z, x * x - y * y); }
-        case 15u: { return SH_C3[6] * vec3<f32>(3.0 * x * x - 3.0 * y * y, -6.0 * x * y, 0.0); }
-        default: { return vec3<f32>(0.0); }
+    var v_d = sh_term_backward(0u, SH_C0, vec3<f32>(0.0), v_pre, out, row, n);
+    if (n > 1u) {
+        v_d += sh_term_backward(1u, -SH_C1 * y, vec3<f32>(0.0, -SH_C1, 0.0), v_pre, out, row, n);
+        v_d += sh_term_backward(2u, SH_C1 * z, vec3<f32>(0.0, 0.0, SH_C1), v_pre, out, row, n);
+        v_d += sh_term_backward(3u, -SH_C1 * x, vec3<f32>(-SH_C1, 0.0, 0.0), v_pre, out, row, n);
     }
+    if (n > 4u) {
+        v_d += sh_term_backward(4u, SH_C2[0] * x * y, SH_C2[0] * vec3<f32>(y, x, 0.0), v_pre, out, row, n);
+        v_d += sh_term_backward(5u, SH_C2[1] * y * z, SH_C2[1] * vec3<f32>(0.0, z, y), v_pre, out, row, n);
+        v_d += sh_term_backward(6u, SH_C2[2] * (2.0 * z * z - x * x - y * y),
+            SH_C2[2] * vec3<f32>(-2.0 * x, -2.0 * y, 4.0 * z), v_pre, out, row, n);
+        v_d += sh_term_backward(7u, SH_C2[3] * x * z, SH_C2[3] * vec3<f32>(z, 0.0, x), v_pre, out, row, n);
+        v_d += sh_term_backward(8u, SH_C2[4] * (x * x - y * y),
+            SH_C2[4] * vec3<f32>(2.0 * x, -2.0 * y, 0.0), v_pre, out, row, n);
+    }
+    if (n > 9u) {
+        v_d += sh_term_backward(9u, SH_C3[0] * y * (3.0 * x * x - y * y),
+            SH_C3[0] * vec3<f32>(6.0 * x * y, 3.0 * x * x - 3.0 * y * y, 0.0), v_pre, out, row, n);
+        v_d += sh_term_backward(10u, SH_C3[1] * x * y * z,
+            SH_C3[1] * vec3<f32>(y * z, x * z, x * y), v_pre, out, row, n);
+        v_d += sh_term_backward(11u, SH_C3[2] * y * (4.0 * z * z - x * x - y * y),
+            SH_C3[2] * vec3<f32>(-2.0 * x * y, 4.0 * z * z - x * x - 3.0 * y * y, 8.0 * y * z), v_pre, out, row, n);
+        v_d += sh_term_backward(12u, SH_C3[3] * z * (2.0 * z * z - 3.0 * x * x - 3.0 * y * y),
+            SH_C3[3] * vec3<f32>(-6.0 * x * z, -6.0 * y * z, 6.0 * z * z - 3.0 * x * x - 3.0 * y * y), v_pre, out, row, n);
+        v_d += sh_term_backward(13u, SH_C3[4] * x * (4.0 * z * z - x * x - y * y),
+            SH_C3[4] * vec3<f32>(4.0 * z * z - 3.0 * x * x - y * y, -2.0 * x * y, 8.0 * x * z), v_pre, out, row, n);
+        v_d += sh_term_backward(14u, SH_C3[5] * z * (x * x - y * y),
+            SH_C3[5] * vec3<f32>(2.0 * x * z, -2.0 * y * z, x * x - y * y), v_pre, out, row, n);
+        v_d += sh_term_backward(15u, SH_C3[6] * x * (x * x - 3.0 * y * y),
+            SH_C3[6] * vec3<f32>(3.0 * x * x - 3.0 * y * y, -6.0 * x * y, 0.0), v_pre, out, row, n);
+    }
+    return v_d;
 }
 
 fn write_zero(g: u32) {
@@ -128,18 +153,8 @@ fn project_backward(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_
     v_quats[g] = (v_qn - f.qn * dot(f.qn, v_qn)) / f.qlen;
 
     let n = globals.sh_coeffs;
-    let basis = sh_basis(f.dir, n);
     let v_pre = select(vec3<f32>(0.0), v_color, f.color_pre > vec3<f32>(0.0));
-    let base = g * 3u * n;
-    let row = shared_row(g) * 3u * n;
-    var v_dir = vec3<f32>(0.0);
-    for (var k = 0u; k < n; k++) {
-        v_sh[base + k] = v_pre.x * basis[k];
-        v_sh[base + n + k] = v_pre.y * basis[k];
-        v_sh[base + 2u * n + k] = v_pre.z * basis[k];
-        let coeff = vec3<f32>(sh[row + k], sh[row + n + k], sh[row + 2u * n + k]);
-        v_dir += dot(v_pre, coeff) * sh_basis_grad(f.dir, k);
-    }
+    let v_dir = sh_backward(f.dir, v_pre, g * 3u * n, shared_row(g) * 3u * n, n);
     v_p += (v_dir - f.dir * dot(f.dir, v_dir)) / f.dist;
     for (var k = 0u; k < 3u; k++) {
         v_means[3u * g + k] = v_p[k];

@@ -71,34 +71,42 @@ fn image_of(g: u32) -> u32 {
     return 0u;
 }
 
-fn sh_basis(d: vec3<f32>, n: u32) -> array<f32, 16> {
-    var b: array<f32, 16>;
+// Coefficient k of the SH row at `row` (3 × n floats, channel-major), as rgb.
+fn sh_coeff(row: u32, n: u32, k: u32) -> vec3<f32> {
+    return vec3<f32>(sh[row + k], sh[row + n + k], sh[row + 2u * n + k]);
+}
+
+// The SH colour (before the +0.5 offset's clamp) of the row at `row` towards unit direction d,
+// written out term by term: an array of basis values indexed in a loop of runtime length would
+// sit in local memory on GPUs.
+fn sh_color(d: vec3<f32>, row: u32, n: u32) -> vec3<f32> {
     let x = d.x;
     let y = d.y;
     let z = d.z;
-    b[0] = SH_C0;
+    var c = vec3<f32>(0.5);
+    c += SH_C0 * sh_coeff(row, n, 0u);
     if (n > 1u) {
-        b[1] = -SH_C1 * y;
-        b[2] = SH_C1 * z;
-        b[3] = -SH_C1 * x;
+        c += -SH_C1 * y * sh_coeff(row, n, 1u);
+        c += SH_C1 * z * sh_coeff(row, n, 2u);
+        c += -SH_C1 * x * sh_coeff(row, n, 3u);
     }
     if (n > 4u) {
-        b[4] = SH_C2[0] * x * y;
-        b[5] = SH_C2[1] * y * z;
-        b[6] = SH_C2[2] * (2.0 * z * z - x * x - y * y);
-        b[7] = SH_C2[3] * x * z;
-        b[8] = SH_C2[4] * (x * x - y * y);
+        c += SH_C2[0] * x * y * sh_coeff(row, n, 4u);
+        c += SH_C2[1] * y * z * sh_coeff(row, n, 5u);
+        c += SH_C2[2] * (2.0 * z * z - x * x - y * y) * sh_coeff(row, n, 6u);
+        c += SH_C2[3] * x * z * sh_coeff(row, n, 7u);
+        c += SH_C2[4] * (x * x - y * y) * sh_coeff(row, n, 8u);
     }
     if (n > 9u) {
-        b[9] = SH_C3[0] * y * (3.0 * x * x - y * y);
-        b[10] = SH_C3[1] * x * y * z;
-        b[11] = SH_C3[2] * y * (4.0 * z * z - x * x - y * y);
-        b[12] = SH_C3[3] * z * (2.0 * z * z - 3.0 * x * x - 3.0 * y * y);
-        b[13] = SH_C3[4] * x * (4.0 * z * z - x * x - y * y);
-        b[14] = SH_C3[5] * z * (x * x - y * y);
-        b[15] = SH_C3[6] * x * (x * x - 3.0 * y * y);
+        c += SH_C3[0] * y * (3.0 * x * x - y * y) * sh_coeff(row, n, 9u);
+        c += SH_C3[1] * x * y * z * sh_coeff(row, n, 10u);
+        c += SH_C3[2] * y * (4.0 * z * z - x * x - y * y) * sh_coeff(row, n, 11u);
+        c += SH_C3[3] * z * (2.0 * z * z - 3.0 * x * x - 3.0 * y * y) * sh_coeff(row, n, 12u);
+        c += SH_C3[4] * x * (4.0 * z * z - x * x - y * y) * sh_coeff(row, n, 13u);
+        c += SH_C3[5] * z * (x * x - y * y) * sh_coeff(row, n, 14u);
+        c += SH_C3[6] * x * (x * x - 3.0 * y * y) * sh_coeff(row, n, 15u);
     }
-    return b;
+    return c;
 }
 
 struct Fwd {
@@ -193,12 +201,7 @@ fn project_forward(g: u32) -> Fwd {
     f.dist = length(dv);
     f.dir = dv / f.dist;
     let n = globals.sh_coeffs;
-    let basis = sh_basis(f.dir, n);
-    let base = shared_row(g) * 3u * n;
-    var color = vec3<f32>(0.5);
-    for (var k = 0u; k < n; k++) {
-        color += basis[k] * vec3<f32>(sh[base + k], sh[base + n + k], sh[base + 2u * n + k]);
-    }
+    let color = sh_color(f.dir, shared_row(g) * 3u * n, n);
     f.color_pre = color;
     f.opacity = 1.0 / (1.0 + exp(-opacity_logits[shared_row(g)]));
     f.valid = finite3(f.conic) && finite(f.mean2d.x) && finite(f.mean2d.y) && finite3(color) && finite(f.opacity)
