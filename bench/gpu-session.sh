@@ -1,14 +1,15 @@
 #!/usr/bin/env bash
 # What a short GPU lease is for, as bounded phases of one command (../shared/notes/gpu-device.md):
 #
-#   bench/gpu-session.sh RESULTS [PHASE...]  (default: step peer-synthetic tests peer-train)
+#   bench/gpu-session.sh RESULTS [PHASE...]  (default: step tests peer-train)
 #
 # A 15-minute lease holds the machine's start (about 40 s on 2026-11-27) and about 800 s of
 # calls; a machine left idle for 30 s is gone. Measured on an H200 (2026-11-27), before the
-# step phase's block-layout and raster-block runs were added (about 30 s more now): step 45 s,
-# peer-synthetic 85 s (65 of them gsplat's CUDA build), tests 55 s, peer-train 250 s with gsplat
-# built (plus up to 40 s of benches after the peer now): the default phases fit one call of
-# BUDGET=540, which leaves time for a second call (e.g. `gates`) only if it is made at once.
+# step phase's block-layout, raster-block and split-list runs were added (about 50 s more now):
+# step 45 s, peer-synthetic 85 s (65 of them gsplat's CUDA build), tests 55 s, peer-train 250 s
+# with gsplat built (plus about 20 s of benches after the peer now). The default phases fit one
+# call of BUDGET=540; peer-synthetic (#11's 1M-Gaussian figure, met on 2026-11-27) and
+# train-split fit a second call made at once (e.g. `BUDGET=280 ... train-split peer-synthetic`).
 #
 # BUDGET (seconds, default 560) bounds the whole call: a phase that would not fit what is left is
 # skipped and says so in RESULTS/session.txt, and every command's timeout is cut to what is
@@ -31,13 +32,14 @@
 #                   DEV has gemm-bench (`cargo bench --bench gemm --no-run`, stripped), F's 3×3
 #                   layer as a plain GEMM at 100×75 and 400×300 on the f32 tiled product and on
 #                   tensor cores in every layout (COCOG_COOPERATIVE_MATRIX=1)
-#                                               ~75 s on an H200 (45 s measured before layouts)
+#                                               ~95 s on an H200 (45 s measured before layouts)
 #   peer-synthetic  #11: `cocog bench --synthetic 1000000 --size 1920x1080` (and with --zoom 3,
 #                   most Gaussians culled, per kernel), then gsplat on the same Gaussians and
 #                   cameras (peer_gsplat.py workload)                             ~20 s + gsplat build (65 s)
 #   peer-train      #11: sharp-dev at 400×300, 30000 iterations: `cocog train --method 3dgs`
 #                   (timed without evaluations or checkpoints) and `cocog eval`, then gsplat on
-#                   the same views (peer_gsplat.py train)                          ~250 s + gsplat build
+#                   the same views (peer_gsplat.py train), then the 3dgs step at the run's end
+#                   in each compositing setting                                    ~265 s + gsplat build
 #   train-split     peer-train's cocog run with the backward's tile lists split
 #                   (COCOG_RASTER_SPLIT, default auto), then `cocog eval`           ~80 s
 #   idle-bench      `cocog bench` rows of sharp-dev at 100×75 and 1M random Gaussians at 1080p
@@ -60,7 +62,7 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 results="${1:?usage: bench/gpu-session.sh RESULTS [PHASE...]}"
 shift
 phases=("$@")
-((${#phases[@]})) || phases=(step peer-synthetic tests peer-train)
+((${#phases[@]})) || phases=(step tests peer-train)
 budget="${BUDGET:-560}"
 dev="${DEV:-$root/.device}"
 work="${WORK:-/tmp/gpu-session}"
@@ -245,9 +247,9 @@ while ((i < ${#phases[@]})); do
     p="${phases[i]}"
     i=$((i + 1))
     case "$p" in
-        step) run_phase step 120 ;;
+        step) run_phase step 140 ;;
         peer-synthetic) run_phase peer-synthetic 165 ;;
-        peer-train) run_phase peer-train 360 ;;
+        peer-train) run_phase peer-train 375 ;;
         train-split) run_phase train-split 120 ;;
         idle-bench) run_phase idle-bench 120 ;;
         tests) run_phase tests 90 ;;

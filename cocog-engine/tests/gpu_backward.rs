@@ -4,6 +4,7 @@
 mod common;
 
 use cocog_engine::reference::{Gaussians64, raster_backward, render_backward};
+use cocog_engine::splat::MAX_SPLIT;
 use cocog_engine::{Batch, Camera, GaussianParams, GpuContext, RasterSplit, Renderer, View};
 use common::{gpu, random_scene, random_weights, scenes_per_camera, test_camera, views_of};
 
@@ -17,13 +18,20 @@ fn group_names(g: &GaussianParams) -> Vec<&'static str> {
     names
 }
 
-fn check(ctx: &GpuContext, renderer: &Renderer, views: &[View<'_>], seed: u64) {
-    check_with(ctx, renderer, views, seed, true);
+/// Returns the chunks per tile list the backward walked (`RasterSplit`).
+fn check(ctx: &GpuContext, renderer: &Renderer, views: &[View<'_>], seed: u64) -> u32 {
+    check_with(ctx, renderer, views, seed, true)
 }
 
 /// `depth = false`: the loss has no depth term, so the backward runs without its depth channel
 /// (`v_depth: None`) and the reference sees zero depth weights.
-fn check_with(ctx: &GpuContext, renderer: &Renderer, views: &[View<'_>], seed: u64, depth: bool) {
+fn check_with(
+    ctx: &GpuContext,
+    renderer: &Renderer,
+    views: &[View<'_>],
+    seed: u64,
+    depth: bool,
+) -> u32 {
     let batch = Batch::from_views(ctx, views).unwrap();
     let state = renderer.forward(ctx, &batch).unwrap();
     let npix = (batch.width() * batch.height()) as usize;
@@ -105,6 +113,7 @@ fn check_with(ctx: &GpuContext, renderer: &Renderer, views: &[View<'_>], seed: u
             eprintln!("image {i} {name}: worst error {worst:.2} of tolerance (scale {scale:.2e})");
         }
     }
+    state.splits()
 }
 
 fn one_image(degree: u32, n: usize, seed: u64) -> (GaussianParams, Camera) {
@@ -215,7 +224,8 @@ fn backward_in_8x8_blocks_matches_reference() {
 /// (`with_raster_split`): chunks of a few Gaussians, so most pixels start a chunk from the
 /// state the forward recorded at its end; both accumulation paths, with and without depth, in
 /// 16×16 tiles and 8×8 blocks; then a dense scene whose pixels run out of transmittance before,
-/// inside and after chunk boundaries, and a batch of frames split as `Auto` splits them.
+/// inside and after chunk boundaries; a sparse one with empty tiles and lists shorter than the
+/// split; and ragged frames in a batch.
 #[test]
 fn backward_in_chunks_matches_reference() {
     let Some(ctx) = gpu() else { return };
@@ -232,7 +242,10 @@ fn backward_in_chunks_matches_reference() {
             camera: &cam,
             background: [0.6, 0.3, 0.2],
         };
-        check_with(ctx, &renderer, &[view], seed + 100, depth);
+        assert_eq!(
+            check_with(ctx, &renderer, &[view], seed + 100, depth),
+            split
+        );
     }
     let renderer = Renderer::new(ctx).with_raster_split(RasterSplit::Fixed(7));
     let (mut g, cam) = one_image(1, 300, 55);
@@ -244,9 +257,59 @@ fn backward_in_chunks_matches_reference() {
         camera: &cam,
         background: [1.0, 1.0, 1.0],
     };
-    check(ctx, &renderer, &[view], 155);
-    let renderer = Renderer::new(ctx).with_raster_split(RasterSplit::Auto);
-    let (cams, sets) = scenes_per_camera(2, (45, 37), 0.1, 2, |_| 50, 70);
+    assert_eq!(check(ctx, &renderer, &[view], 155), 7);
+    let renderer = Renderer::new(ctx).with_raster_split(RasterSplit::Fixed(4));
+    let (g, cam) = one_image(1, 6, 56);
+    let view = View {
+        gaussians: &g,
+        camera: &cam,
+        background: [0.3, 0.6, 0.9],
+    };
+    assert_eq!(check(ctx, &renderer, &[view], 156), 4);
+    let renderer = Renderer::new(ctx)
+        .with_raster_block(ctx, 8)
+        .with_raster_split(RasterSplit::Fixed(5));
+    let (cams, sets) = scenes_per_camera(2, (45, 37), 0.1, 2, |_| 80, 57);
     let views = views_of(&cams, &sets, |i| [0.1, 0.3 * i as f32, 0.6]);
-    check(ctx, &renderer, &views, 56);
+    assert_eq!(check(ctx, &renderer, &views, 157), 5);
+}
+
+/// Chunks of hundreds of Gaussians, each walked in several batches (as on real captures), in
+/// 16×16 tiles and 8×8 blocks, both accumulation paths; then `RasterSplit::Auto` on the same
+/// kind of scene, which splits a small frame into `MAX_SPLIT` chunks of at least
+/// `AUTO_MIN_CHUNK`.
+#[test]
+fn backward_in_long_chunks_matches_reference() {
+    let Some(ctx) = gpu() else { return };
+    for (renderer, split, n, shift, seed) in [
+        (Renderer::new(ctx), 2, 4000, -3.0, 61),
+        (Renderer::new(ctx), 3, 4000, 0.0, 62),
+        (
+            Renderer::new(ctx).with_raster_block(ctx, 8),
+            2,
+            3000,
+            -2.0,
+            63,
+        ),
+        (Renderer::with_options(ctx, false, false), 2, 4000, -3.0, 64),
+        (Renderer::new(ctx), 0, 3000, -2.0, 65),
+    ] {
+        let renderer = renderer.with_raster_split(if split == 0 {
+            RasterSplit::Auto
+        } else {
+            RasterSplit::Fixed(split)
+        });
+        let (mut g, cam) = one_image(1, n, seed);
+        // Fainter Gaussians: lists stay long before transmittance runs out.
+        for o in &mut g.opacity_logits {
+            *o += shift;
+        }
+        let view = View {
+            gaussians: &g,
+            camera: &cam,
+            background: [0.3, 0.6, 0.9],
+        };
+        let expected = if split == 0 { MAX_SPLIT } else { split };
+        assert_eq!(check(ctx, &renderer, &[view], seed + 100), expected);
+    }
 }

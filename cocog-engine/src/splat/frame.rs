@@ -62,7 +62,7 @@ impl Renderer {
                 spec.rows(first_row, rows)
             };
             batch.set_images(ctx, vec![band])?;
-            let state = match self.forward(ctx, batch) {
+            let state = match self.forward_split(ctx, batch, false) {
                 Err(EngineError::TooManyIntersections { .. }) if rows > TILE_SIZE => {
                     let top = (rows / 2).div_ceil(TILE_SIZE) * TILE_SIZE;
                     todo.push((first_row + top, rows - top));

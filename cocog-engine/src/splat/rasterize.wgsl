@@ -16,6 +16,8 @@ struct Params {
     // Pixels of every image: the stride of a chunk slot.
     pixels: u32,
     splits: u32,
+    // Shortest chunk: lists shorter than splits × min_chunk have fewer, the rest none.
+    min_chunk: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -59,7 +61,7 @@ fn rasterize(
     let range = ranges[tile];
     let pix = (image * params.height + py) * params.width + px;
     // Chunks of `chunk` Gaussians (the backward's split); no boundary when unsplit.
-    let chunk = (range.y - range.x + params.splits - 1u) / params.splits;
+    let chunk = max(params.min_chunk, (range.y - range.x + params.splits - 1u) / params.splits);
     var boundary = 0xffffffffu;
     if (params.splits > 1u && inside) {
         boundary = range.x + chunk;

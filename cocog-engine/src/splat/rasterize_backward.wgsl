@@ -11,7 +11,7 @@
 // own last Gaussian, or its subgroup's (so the subgroup stays in step for the sums). The host also prepends `DEPTH_GRAD` and `depth_grad`:
 // the binding of `v_depth` (slot 8) where a loss needs depth, or a constant 0 that compiles the
 // depth channel out (no read, no compositing of depth, one atomic fewer per Gaussian).
-// With `splits` S > 1, workgroup z = image × S + c walks only chunk c of its tile's list (the
+// With `splits` S > 1, workgroup x = block × S + c walks only chunk c of its tile's list (the
 // forward's split, rasterize.wgsl): a pixel that composited past the chunk starts from the
 // transmittance the forward recorded at the chunk's end, and from what lies behind it, its
 // final colour and depth less those in front of that boundary.
@@ -23,6 +23,8 @@ struct Params {
     tiles_y: u32,
     pixels: u32,
     splits: u32,
+    // Shortest chunk: lists shorter than splits × min_chunk have fewer, the rest none.
+    min_chunk: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -34,6 +36,8 @@ struct Params {
 @group(0) @binding(6) var<storage, read> out_last: array<u32>;
 @group(0) @binding(7) var<storage, read> v_rgba: array<vec4<f32>>;
 @group(0) @binding(10) var<storage, read> chunk_state: array<vec4<f32>>;
+// Read only with the depth channel; bound either way (naga keeps a binding that only dead code
+// reads in the layout).
 @group(0) @binding(11) var<storage, read> chunk_depth: array<f32>;
 
 const BATCH: u32 = SUB * SUB;
@@ -58,18 +62,26 @@ fn rasterize_backward(
     // SUBGROUP_PARAM
 ) {
     let lid = vec2<u32>(tid % SUB, tid / SUB);
-    let image = wid.z / params.splits;
-    let part = wid.z % params.splits;
-    let tile = (image * params.tiles_y + wid.y / PER_TILE) * params.tiles_x + wid.x / PER_TILE;
-    let px = wid.x * SUB + lid.x;
+    // A block's chunks are neighbours in the grid, so however an adapter deals consecutive
+    // workgroups out (lavapipe: ranges of them to each thread), a long list's first chunks do
+    // not all land together.
+    let image = wid.z;
+    let part = wid.x % params.splits;
+    let bx = wid.x / params.splits;
+    let tile = (image * params.tiles_y + wid.y / PER_TILE) * params.tiles_x + bx / PER_TILE;
+    let px = bx * SUB + lid.x;
     let py = wid.y * SUB + lid.y;
     let inside = px < params.width && py < params.height;
     let centre = vec2<f32>(f32(px) + 0.5, f32(py) + 0.5);
     let range = ranges[tile];
     let pix = (image * params.height + py) * params.width + px;
-    let chunk = (range.y - range.x + params.splits - 1u) / params.splits;
+    let chunk = max(params.min_chunk, (range.y - range.x + params.splits - 1u) / params.splits);
     let chunk_begin = min(range.y, range.x + part * chunk);
     let chunk_end = min(range.y, chunk_begin + chunk);
+    // A chunk past a short list: nothing to walk (range is the same for the whole workgroup).
+    if (part > 0u && chunk_begin == range.y) {
+        return;
+    }
 
     var t_final = 1.0;
     var last = range.x;
@@ -91,7 +103,9 @@ fn rasterize_backward(
         let front = chunk_state[at];
         t = front.w;
         behind += chunk_state[fin].xyz - front.xyz;
-        behind_depth = chunk_depth[fin] - chunk_depth[at];
+        if (DEPTH_GRAD) {
+            behind_depth = chunk_depth[fin] - chunk_depth[at];
+        }
     }
     if (tid == 0u) {
         atomicStore(&tile_end, range.x);

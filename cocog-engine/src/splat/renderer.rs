@@ -46,7 +46,8 @@ struct RasterParams {
     tiles_y: u32,
     pixels: u32,
     splits: u32,
-    pad: [u32; 2],
+    min_chunk: u32,
+    pad: u32,
 }
 
 /// Compiled pipelines of the engine; build once per device and reuse.
@@ -81,12 +82,16 @@ pub struct Renderer {
 /// serial walk, and a small frame has too few tiles to fill a GPU.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum RasterSplit {
-    /// This many chunks per tile (1: unsplit).
+    /// Every list in this many chunks of equal length (1: unsplit), however short.
     Fixed(u32),
     /// Enough chunks that a frame's backward has about `SPLIT_TARGET` workgroups, at most
-    /// `MAX_SPLIT`.
+    /// `MAX_SPLIT`, none shorter than `AUTO_MIN_CHUNK` Gaussians: a chunk's workgroup pays
+    /// its set-up (per-pixel loads, barriers) however few Gaussians it walks.
     Auto,
 }
+
+/// Shortest chunk `RasterSplit::Auto` cuts a list into.
+pub const AUTO_MIN_CHUNK: u32 = 64;
 
 /// Workgroups `RasterSplit::Auto` aims a compositing backward at.
 pub const SPLIT_TARGET: u32 = 2048;
@@ -96,13 +101,21 @@ pub const MAX_SPLIT: u32 = 16;
 /// `COCOG_RASTER_SPLIT=N` (1 to `MAX_SPLIT`) or `auto` splits the compositing backward's tile
 /// lists (experimental, untimed on a GPU); unset or anything else leaves them whole.
 pub fn raster_split_from_env() -> RasterSplit {
-    match std::env::var("COCOG_RASTER_SPLIT").as_deref() {
-        Ok("auto") => RasterSplit::Auto,
-        Ok(n) => match n.parse::<u32>() {
-            Ok(n) if (1..=MAX_SPLIT).contains(&n) => RasterSplit::Fixed(n),
-            _ => RasterSplit::Fixed(1),
-        },
-        Err(_) => RasterSplit::Fixed(1),
+    let Ok(value) = std::env::var("COCOG_RASTER_SPLIT") else {
+        return RasterSplit::Fixed(1);
+    };
+    if value == "auto" {
+        return RasterSplit::Auto;
+    }
+    match value.parse::<u32>() {
+        Ok(n) if (1..=MAX_SPLIT).contains(&n) => RasterSplit::Fixed(n),
+        // Said on stderr, as the other experimental switches do, rather than refused.
+        _ => {
+            eprintln!(
+                "COCOG_RASTER_SPLIT={value}: expected auto or 1 to {MAX_SPLIT}; tile lists stay whole"
+            );
+            RasterSplit::Fixed(1)
+        }
     }
 }
 
@@ -217,22 +230,23 @@ impl Renderer {
         }
     }
 
-    fn raster_params(batch: &Batch, splits: u32) -> RasterParams {
+    fn raster_params(batch: &Batch, splits: u32, min_chunk: u32) -> RasterParams {
         let (tiles_x, tiles_y) = batch.tiles();
         RasterParams {
             width: batch.width(),
             height: batch.height(),
             tiles_x,
             tiles_y,
-            // Below 2^32: every per-pixel buffer fits a binding.
-            pixels: batch.num_pixels() as u32,
+            // Every per-pixel buffer fits a binding, and the renderer bands frames that would not.
+            pixels: u32::try_from(batch.num_pixels()).expect("a batch's pixels fit in u32"),
             splits,
-            pad: [0; 2],
+            min_chunk,
+            pad: 0,
         }
     }
 
     /// Chunks per tile list for `batch`: as asked, within what one binding of the chunk state
-    /// (16 bytes per pixel and chunk) and the grid's z (images × chunks) allow.
+    /// (16 bytes per pixel and chunk) and the grid's x (blocks in a row × chunks) allow.
     fn splits(&self, ctx: &GpuContext, batch: &Batch) -> u32 {
         let (tiles_x, tiles_y) = batch.tiles();
         let per_tile = 16 / self.raster_block;
@@ -245,7 +259,7 @@ impl Renderer {
         };
         let by_binding = self.binding_limit(ctx) / (16 * batch.num_pixels().max(1));
         let by_grid =
-            ctx.device.limits().max_compute_workgroups_per_dimension / batch.num_images().max(1);
+            ctx.device.limits().max_compute_workgroups_per_dimension / (tiles_x * per_tile).max(1);
         wanted
             .min(MAX_SPLIT)
             .min(u32::try_from(by_binding).unwrap_or(u32::MAX))
@@ -258,6 +272,16 @@ impl Renderer {
     /// GPU. Training loops use `encode_forward`, which never waits. Fails with
     /// `TooManyIntersections` when the intersections outgrow a binding.
     pub fn forward(&self, ctx: &GpuContext, batch: &Batch) -> Result<ForwardState, EngineError> {
+        self.forward_split(ctx, batch, true)
+    }
+
+    /// `forward`; without `split`, no chunk state for a backward (frames rendered to be seen).
+    pub(crate) fn forward_split(
+        &self,
+        ctx: &GpuContext,
+        batch: &Batch,
+        split: bool,
+    ) -> Result<ForwardState, EngineError> {
         let mut ws = Workspace::default();
         let most = self.max_intersections(ctx);
         let mut capacity = batch
@@ -268,7 +292,8 @@ impl Renderer {
             .min(most);
         loop {
             let mut rec = ctx.recorder();
-            let mut state = self.encode_forward(&mut rec, &mut ws, batch, capacity);
+            let splits = if split { self.splits(ctx, batch) } else { 1 };
+            let mut state = self.encode_forward_in(&mut rec, &mut ws, batch, capacity, splits);
             rec.submit();
             let [_, k]: [u32; 2] = ctx
                 .read(&state.status, 2)?
@@ -295,6 +320,19 @@ impl Renderer {
         ws: &mut Workspace,
         batch: &Batch,
         capacity: u32,
+    ) -> ForwardState {
+        let splits = self.splits(rec.ctx(), batch);
+        self.encode_forward_in(rec, ws, batch, capacity, splits)
+    }
+
+    /// `encode_forward` recording chunk state for a backward of `splits` chunks per list.
+    fn encode_forward_in(
+        &self,
+        rec: &mut Recorder,
+        ws: &mut Workspace,
+        batch: &Batch,
+        capacity: u32,
+        splits: u32,
     ) -> ForwardState {
         let ctx = rec.ctx();
         let n = batch.params.num_gaussians;
@@ -410,7 +448,6 @@ impl Renderer {
             groups(capacity),
         );
         let pixels = batch.num_pixels();
-        let splits = self.splits(ctx, batch);
         // Unsplit, nothing reads the chunk state: a word each keeps the bindings valid.
         let chunk_pixels = if splits > 1 { pixels } else { 1 };
         let state = ForwardState {
@@ -426,8 +463,12 @@ impl Renderer {
             splits,
             chunk_state: ws.buffer(ctx, "chunk state", chunk_pixels * 16 * u64::from(splits)),
             chunk_depth: ws.buffer(ctx, "chunk depth", chunk_pixels * 4 * u64::from(splits)),
+            min_chunk: match self.raster_split {
+                RasterSplit::Fixed(_) => 1,
+                RasterSplit::Auto => AUTO_MIN_CHUNK,
+            },
         };
-        let raster = rec.uniform(&Self::raster_params(batch, splits));
+        let raster = rec.uniform(&Self::raster_params(batch, splits, state.min_chunk));
         let per_tile = 16 / self.raster_block;
         self.rasterize.dispatch(
             rec,
@@ -464,11 +505,6 @@ impl Renderer {
     pub fn with_raster_split(mut self, split: RasterSplit) -> Self {
         self.raster_split = split;
         self
-    }
-
-    /// The compositing block's side and the list split, as set.
-    pub fn raster_setting(&self) -> (u32, RasterSplit) {
-        (self.raster_block, self.raster_split)
     }
 
     fn rasterize_kernel(ctx: &GpuContext, block: u32) -> Kernel {
@@ -544,7 +580,7 @@ impl Renderer {
         let (tiles_x, tiles_y) = batch.tiles();
         let v_proj = ws.zeroed(rec, "v_projected", u64::from(n) * 40);
         let grads = ParamBuffers::gradients_in(ctx, ws, &batch.params);
-        let raster = rec.uniform(&Self::raster_params(batch, state.splits));
+        let raster = rec.uniform(&Self::raster_params(batch, state.splits, state.min_chunk));
         let globals = rec.uniform(&Self::globals(batch));
         let mut binds: Vec<(u32, &dyn Bind)> = vec![
             (0, &raster),
@@ -567,9 +603,9 @@ impl Renderer {
             rec,
             &binds,
             [
-                tiles_x * per_tile,
+                tiles_x * per_tile * state.splits,
                 tiles_y * per_tile,
-                batch.num_images() * state.splits,
+                batch.num_images(),
             ],
         );
         let p = &batch.params;

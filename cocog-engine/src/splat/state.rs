@@ -30,6 +30,8 @@ pub struct ForwardState {
     pub(crate) splits: u32,
     pub(crate) chunk_state: GpuBuffer,
     pub(crate) chunk_depth: GpuBuffer,
+    /// The shortest chunk the forward cut a list into (`RasterSplit`).
+    pub(crate) min_chunk: u32,
 }
 
 /// Output of `Renderer::backward`.
@@ -53,6 +55,11 @@ pub struct RenderedImage {
 }
 
 impl ForwardState {
+    /// Chunks per tile list the backward of this pass walks (`RasterSplit`; 1: whole lists).
+    pub fn splits(&self) -> u32 {
+        self.splits
+    }
+
     /// Reads every image of the batch back to the CPU.
     pub fn read_images(
         &self,
