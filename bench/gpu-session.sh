@@ -1,15 +1,17 @@
 #!/usr/bin/env bash
 # What a short GPU lease is for, as bounded phases of one command (../shared/notes/gpu-device.md):
 #
-#   bench/gpu-session.sh RESULTS [PHASE...]  (default: step tests peer-train)
+#   bench/gpu-session.sh RESULTS [PHASE...]  (default: step peer-train tests)
 #
 # A 15-minute lease holds the machine's start (about 40 s on 2026-11-27) and about 800 s of
 # calls; a machine left idle for 30 s is gone. Measured on an H200 (2026-11-27), before the
 # step phase's block-layout, raster-block and split-list runs were added (about 50 s more now):
 # step 45 s, peer-synthetic 85 s (65 of them gsplat's CUDA build), tests 55 s, peer-train 250 s
-# with gsplat built (plus about 20 s of benches after the peer now). The default phases fit one
-# call of BUDGET=540; peer-synthetic (#11's 1M-Gaussian figure, met on 2026-11-27) and
-# train-split fit a second call made at once (e.g. `BUDGET=280 ... train-split peer-synthetic`).
+# with gsplat built (plus four benches of at most 20 s after the peer now; peer-train builds
+# gsplat when peer-synthetic has not). The default phases fit one call of BUDGET=540, peer-train
+# before tests so the phase the call is for starts with room to spare; peer-synthetic (#11's
+# 1M-Gaussian figure, met on 2026-11-27) and train-split fit a second call made at once (e.g.
+# `BUDGET=250 ... train-split peer-synthetic`).
 #
 # BUDGET (seconds, default 560) bounds the whole call: a phase that would not fit what is left is
 # skipped and says so in RESULTS/session.txt, and every command's timeout is cut to what is
@@ -62,7 +64,7 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 results="${1:?usage: bench/gpu-session.sh RESULTS [PHASE...]}"
 shift
 phases=("$@")
-((${#phases[@]})) || phases=(step tests peer-train)
+((${#phases[@]})) || phases=(step peer-train tests)
 budget="${BUDGET:-560}"
 dev="${DEV:-$root/.device}"
 work="${WORK:-/tmp/gpu-session}"
@@ -143,7 +145,7 @@ phase_step() {
     local c
     for c in "${raster_settings[@]}"; do
         echo "-- 3dgs step at 400×300 on the model's Gaussians, $c" >>"$log"
-        bounded 60 env $c "$cocog" bench "$work/in-dev-table" --downscale 1 \
+        bounded 60 env -u COCOG_RASTER_SPLIT -u COCOG_RASTER_BLOCK $c "$cocog" bench "$work/in-dev-table" --downscale 1 \
             --resume "$model" --method 3dgs --iterations 100 --warmup 10 --kernels >>"$log" 2>&1
     done
     for m in gemm:4x4 coop:4x4 coop:4x8 coop:4x16 coop:4x8k4 coop:8x8 coop:4x4p coop:4x8p; do
@@ -198,7 +200,7 @@ phase_peer_train() {
     local c
     for c in "${raster_settings[@]}"; do
         echo "-- 3dgs step on the trained model, $c" >>"$log"
-        bounded 20 env $c "$cocog" bench "$work/in-sharp-dev" --resume "$out" \
+        bounded 20 env -u COCOG_RASTER_SPLIT -u COCOG_RASTER_BLOCK $c "$cocog" bench "$work/in-sharp-dev" --resume "$out" \
             --method 3dgs --iterations 200 --warmup 20 --kernels >>"$log" 2>&1
     done
 }

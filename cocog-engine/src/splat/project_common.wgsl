@@ -76,9 +76,10 @@ fn sh_coeff(row: u32, n: u32, k: u32) -> vec3<f32> {
     return vec3<f32>(sh[row + k], sh[row + n + k], sh[row + 2u * n + k]);
 }
 
-// The SH colour (before the +0.5 offset's clamp) of the row at `row` towards unit direction d,
-// written out term by term: an array of basis values indexed in a loop of runtime length would
-// sit in local memory on GPUs.
+// The SH colour (with the +0.5 offset, before the clamp at 0) of the row at `row` towards unit
+// direction d, written out term by term: an array of basis values indexed in a loop of runtime
+// length would sit in local memory on GPUs. sh_backward (project_backward.wgsl) repeats the
+// polynomials with their gradients: change both.
 fn sh_color(d: vec3<f32>, row: u32, n: u32) -> vec3<f32> {
     let x = d.x;
     let y = d.y;

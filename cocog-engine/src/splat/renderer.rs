@@ -82,18 +82,20 @@ pub struct Renderer {
 /// serial walk, and a small frame has too few tiles to fill a GPU.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum RasterSplit {
-    /// Every list in this many chunks of equal length (1: unsplit), however short.
+    /// Every list in this many chunks of ⌈length / N⌉ Gaussians, the last one shorter (1:
+    /// unsplit), however short.
     Fixed(u32),
-    /// Enough chunks that a frame's backward has about `SPLIT_TARGET` workgroups, at most
-    /// `MAX_SPLIT`, none shorter than `AUTO_MIN_CHUNK` Gaussians: a chunk's workgroup pays
-    /// its set-up (per-pixel loads, barriers) however few Gaussians it walks.
+    /// Enough chunks that a backward dispatch (all of a batch's images) has about
+    /// `SPLIT_TARGET` workgroups, at most `MAX_SPLIT`, none but a list's last shorter than
+    /// `AUTO_MIN_CHUNK` Gaussians: a chunk's workgroup pays its set-up (per-pixel loads,
+    /// barriers) however few Gaussians it walks.
     Auto,
 }
 
 /// Shortest chunk `RasterSplit::Auto` cuts a list into.
 pub const AUTO_MIN_CHUNK: u32 = 64;
 
-/// Workgroups `RasterSplit::Auto` aims a compositing backward at.
+/// Workgroups `RasterSplit::Auto` aims a compositing backward's dispatch at.
 pub const SPLIT_TARGET: u32 = 2048;
 /// Most chunks per tile list.
 pub const MAX_SPLIT: u32 = 16;
