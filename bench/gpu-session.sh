@@ -5,13 +5,14 @@
 #
 # A 15-minute lease holds the machine's start (about 40 s on 2026-11-27) and about 800 s of
 # calls; a machine left idle for 30 s is gone. Measured on an H200 (2026-11-27), before the
-# step phase's block-layout, raster-block and split-list runs were added (about 50 s more now):
-# step 45 s, peer-synthetic 85 s (65 of them gsplat's CUDA build), tests 55 s, peer-train 250 s
+# step phase's raster-block and split-list runs were added (about 30 s more now; its block
+# layouts are a phase of their own): step 45 s, peer-synthetic 85 s (65 of them gsplat's CUDA
+# build), tests 55 s, peer-train 250 s
 # with gsplat built (plus four benches of at most 20 s after the peer now; peer-train builds
 # gsplat when peer-synthetic has not). The default phases fit one call of BUDGET=540, peer-train
-# before tests so the phase the call is for starts with room to spare; peer-synthetic (#11's
-# 1M-Gaussian figure, met on 2026-11-27) and train-split fit a second call made at once (e.g.
-# `BUDGET=250 ... train-split peer-synthetic`).
+# before tests so the phase the call is for starts with room to spare. A second call made at
+# once fits train-split and layouts (`BUDGET=250 ... train-split layouts`); peer-synthetic
+# (#11's 1M-Gaussian figure, met on 2026-11-27) only where the lease has room left.
 #
 # BUDGET (seconds, default 560) bounds the whole call: a phase that would not fit what is left is
 # skipped and says so in RESULTS/session.txt, and every command's timeout is cut to what is
@@ -28,13 +29,16 @@
 #                   (--kernels), and on tensor cores (COCOG_F_CONV=coop, f16 operands,
 #                   experimental), and both steps compositing in 8×8 blocks
 #                   (COCOG_RASTER_BLOCK=8) or with the backward's tile lists split
-#                   (COCOG_RASTER_SPLIT=auto); the 3dgs step (each of those, and 4 chunks) and the cocog step at 400×300 on the same
-#                   Gaussians, F on the f32 products and on tensor cores in every block layout
-#                   (COCOG_COOP_BLOCK; what a step of #12's full-size gate costs); then, where
-#                   DEV has gemm-bench (`cargo bench --bench gemm --no-run`, stripped), F's 3×3
-#                   layer as a plain GEMM at 100×75 and 400×300 on the f32 tiled product and on
-#                   tensor cores in every layout (COCOG_COOPERATIVE_MATRIX=1)
-#                                               ~95 s on an H200 (45 s measured before layouts)
+#                   (COCOG_RASTER_SPLIT=auto); then at 400×300 on the same Gaussians the 3dgs
+#                   step (each of those settings, and 4 chunks) and the cocog step (what a step
+#                   of #12's full-size gate costs), F on the f32 products and on tensor cores
+#                   in the default block layout                              ~75 s on an H200
+#   layouts         the cocog step at 400×300 with F on tensor cores in each other block layout
+#                   (COCOG_COOP_BLOCK: wider blocks, deeper slices, prefetching, skewed rows);
+#                   then, where DEV has gemm-bench (`cargo bench --bench gemm --no-run`,
+#                   stripped), F's 3×3 layer as a plain GEMM at 100×75 and 400×300 on the f32
+#                   tiled product and on tensor cores in every layout
+#                   (COCOG_COOPERATIVE_MATRIX=1)                                         ~90 s
 #   peer-synthetic  #11: `cocog bench --synthetic 1000000 --size 1920x1080` (and with --zoom 3,
 #                   most Gaussians culled, per kernel), then gsplat on the same Gaussians and
 #                   cameras (peer_gsplat.py workload)                             ~20 s + gsplat build (65 s)
@@ -120,10 +124,19 @@ gsplat_ready() {
         MAX_JOBS="${MAX_JOBS:-16}"
 }
 
-phase_step() {
+# The Gaussians step and layouts bench on: a 5000-iteration 3dgs run on dev-table at 100×75,
+# trained once per machine.
+step_model() {
     local model="$work/step-model"
-    bounded 120 "$cocog" train "$work/in-dev-table" -o "$model" --downscale 4 --method 3dgs \
-        --iterations 5000 --checkpoint-every 0 -q --force >>"$log" 2>&1
+    [[ -f "$model/gaussians.ply" ]] || bounded 120 "$cocog" train "$work/in-dev-table" \
+        -o "$model" --downscale 4 --method 3dgs --iterations 5000 --checkpoint-every 0 -q \
+        --force >>"$log" 2>&1
+    echo "$model"
+}
+
+phase_step() {
+    local model
+    model=$(step_model)
     local m vars
     for m in 3dgs cocog cocog-tiled cocog-f32 cocog-coop 3dgs-b8 cocog-b8 3dgs-split cocog-split; do
         echo "-- $m step on the model's Gaussians" >>"$log"
@@ -140,21 +153,38 @@ phase_step() {
             >>"$log" 2>&1
     done
     # The same Gaussians at full size (400×300): what a step of #12's full-size gate costs,
-    # against the 3dgs step there, on the f32 products and on tensor cores in every block
-    # layout (CoopBlock).
+    # against the 3dgs step there, with F on the f32 products and on tensor cores (the default
+    # layout; the layouts phase times the others).
     local c
     for c in "${raster_settings[@]}"; do
         echo "-- 3dgs step at 400×300 on the model's Gaussians, $c" >>"$log"
         bounded 60 env -u COCOG_RASTER_SPLIT -u COCOG_RASTER_BLOCK $c "$cocog" bench "$work/in-dev-table" --downscale 1 \
             --resume "$model" --method 3dgs --iterations 100 --warmup 10 --kernels >>"$log" 2>&1
     done
-    for m in gemm:4x4 coop:4x4 coop:4x8 coop:4x16 coop:4x8k4 coop:8x8 coop:4x4p coop:4x8p; do
+    cocog_full_size "$model" gemm:4x4 coop:4x4
+}
+
+# The cocog step at 400×300 on model $1 with F as each of $2...: gemm:4x4 (the f32 products) or
+# coop:LAYOUT (tensor cores in that CoopBlock layout).
+cocog_full_size() {
+    local model=$1 m
+    shift
+    for m in "$@"; do
         echo "-- cocog step at 400×300 on the model's Gaussians, COCOG_F_CONV=${m%%:*}$([[ $m == coop* ]] && echo " block ${m#*:}")" >>"$log"
         bounded 60 env COCOG_F_CONV=${m%%:*} COCOG_COOP_BLOCK=${m#*:} \
             COCOG_COOPERATIVE_MATRIX=$([[ $m == coop* ]] && echo 1 || echo 0) \
             "$cocog" bench "$work/in-dev-table" --downscale 1 --resume "$model" --method cocog \
             --iterations 30 --warmup 5 >>"$log" 2>&1
     done
+}
+
+# F on tensor cores in the other block layouts (CoopBlock::NAMED), in the full-size step and,
+# where DEV has gemm-bench, as a bare GEMM at 100×75 and 400×300.
+phase_layouts() {
+    local model
+    model=$(step_model)
+    cocog_full_size "$model" coop:4x8 coop:4x16 coop:4x8k4 coop:8x8 coop:4x4p coop:4x8p \
+        coop:4x4s coop:4x8s coop:4x4ps coop:4x8ps
     if [[ -x "$work/gemm-bench" ]]; then
         local px
         for px in 45056 720000; do
@@ -249,7 +279,8 @@ while ((i < ${#phases[@]})); do
     p="${phases[i]}"
     i=$((i + 1))
     case "$p" in
-        step) run_phase step 140 ;;
+        step) run_phase step 120 ;;
+        layouts) run_phase layouts 120 ;;
         peer-synthetic) run_phase peer-synthetic 165 ;;
         peer-train) run_phase peer-train 375 ;;
         train-split) run_phase train-split 120 ;;

@@ -143,7 +143,10 @@ impl OperandScales {
 /// How gemm_coop.wgsl lays a block of C over a workgroup: `subgroups` (along M, along N), each
 /// accumulating `fragments` (along M, along N), from staged slices `depth` fragments deep;
 /// with `prefetch`, each invocation loads its share of the next slice into registers before
-/// the current slice's products, so the loads' latency overlaps them. Bigger blocks share each
+/// the current slice's products, so the loads' latency overlaps them; `pad` halves more per
+/// staged row skew the rows across workgroup-memory banks (unpadded, the 64- and 128-byte rows
+/// of NVIDIA's slices start in the same banks, so a fragment's rows conflict; 8 halves keep
+/// every row 16-byte aligned, as cooperative loads require). Bigger blocks share each
 /// staged slice among more products; more fragments per subgroup give the tensor cores more
 /// work per load. Which is fastest is the GPU's to say (`cargo bench
 /// --bench gemm` times every named layout), so the default stays the first one until a device
@@ -154,6 +157,7 @@ pub struct CoopBlock {
     pub fragments: (u32, u32),
     pub depth: u32,
     pub prefetch: bool,
+    pub pad: u32,
 }
 
 impl CoopBlock {
@@ -161,9 +165,9 @@ impl CoopBlock {
     pub const SQUARE: Self = Self::new((2, 2), (2, 2), 2);
 
     /// The layouts `COCOG_COOP_BLOCK` names, as fragments of C per block (rows × columns; F's
-    /// products all have M = 64, 4 fragments on NVIDIA), after `k` the slice's depth, and `p`
-    /// for prefetching.
-    pub const NAMED: [(&'static str, Self); 7] = [
+    /// products all have M = 64, 4 fragments on NVIDIA), after `k` the slice's depth, `p`
+    /// for prefetching and `s` for skewed (padded) rows.
+    pub const NAMED: [(&'static str, Self); 11] = [
         ("4x4", Self::SQUARE),
         ("4x8", Self::new((1, 4), (4, 2), 2)),
         ("4x16", Self::new((1, 4), (4, 4), 2)),
@@ -171,6 +175,10 @@ impl CoopBlock {
         ("8x8", Self::new((2, 4), (4, 2), 2)),
         ("4x4p", Self::SQUARE.prefetching()),
         ("4x8p", Self::new((1, 4), (4, 2), 2).prefetching()),
+        ("4x4s", Self::SQUARE.skewed()),
+        ("4x8s", Self::new((1, 4), (4, 2), 2).skewed()),
+        ("4x4ps", Self::SQUARE.prefetching().skewed()),
+        ("4x8ps", Self::new((1, 4), (4, 2), 2).prefetching().skewed()),
     ];
 
     pub const fn new(subgroups: (u32, u32), fragments: (u32, u32), depth: u32) -> Self {
@@ -179,7 +187,13 @@ impl CoopBlock {
             fragments,
             depth,
             prefetch: false,
+            pad: 0,
         }
+    }
+
+    /// Rows of the staged slices 8 halves (16 bytes) longer than their data.
+    pub const fn skewed(self) -> Self {
+        Self { pad: 8, ..self }
     }
 
     pub const fn prefetching(self) -> Self {
@@ -224,7 +238,8 @@ impl CoopBlock {
     pub fn footprint(self, f: CoopFragments) -> (u32, u32) {
         let (bm, bn, bk) = self.dims(f.side);
         let subgroups = self.subgroups.0 * self.subgroups.1;
-        let bytes = 2 * (bm * bk + bk * bn) + 4 * subgroups * f.side * f.side;
+        let bytes =
+            2 * (bm * (bk + self.pad) + bk * (bn + self.pad)) + 4 * subgroups * f.side * f.side;
         (subgroups * f.subgroup, bytes)
     }
 
@@ -235,12 +250,12 @@ impl CoopBlock {
         let (mut acc, mut products, mut stores) = (String::new(), String::new(), String::new());
         for i in 0..wm {
             products += &format!(
-                "            let a{i} = coopLoadT<coop_mat16x16<f16, A>>(&slice_a[(sm + {i}u * FR) * BK + kk], BK);\n"
+                "            let a{i} = coopLoadT<coop_mat16x16<f16, A>>(&slice_a[(sm + {i}u * FR) * SA + kk], SA);\n"
             );
         }
         for j in 0..wn {
             products += &format!(
-                "            let b{j} = coopLoadT<coop_mat16x16<f16, B>>(&slice_b[kk * BN + sn + {j}u * FR], BN);\n"
+                "            let b{j} = coopLoadT<coop_mat16x16<f16, B>>(&slice_b[kk * SB + sn + {j}u * FR], SB);\n"
             );
         }
         for i in 0..wm {
@@ -402,6 +417,7 @@ impl Gemm {
              const FR: u32 = {side}u;\nconst SG: u32 = {}u;\n\
              const GM: u32 = {gm}u;\nconst GN: u32 = {gn}u;\nconst WM: u32 = {wm}u;\n\
              const WN: u32 = {wn}u;\nconst KF: u32 = {}u;\nconst PREFETCH: bool = {};\n\
+             const PAD: u32 = {}u;\n\
              {body}\n{problem}\n{}",
             layout.a_k_fast,
             layout.b_k_fast,
@@ -411,6 +427,7 @@ impl Gemm {
             fragments.subgroup,
             block.depth,
             block.prefetch,
+            block.pad,
             partials_source(layout.split_k),
         )
     }

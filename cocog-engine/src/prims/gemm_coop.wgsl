@@ -20,9 +20,12 @@ const BN: u32 = GN * WN * FR;
 const BK: u32 = KF * FR;
 const FRAG: u32 = FR * FR;
 
-// [BM][BK] and [BK][BN]; then each subgroup's fragment of C on its way to `finish`.
-var<workgroup> slice_a: array<f16, BM * BK>;
-var<workgroup> slice_b: array<f16, BK * BN>;
+// Rows of the staged slices, PAD halves longer than their data (the host's CoopBlock::pad).
+const SA: u32 = BK + PAD;
+const SB: u32 = BN + PAD;
+// [BM][SA] and [BK][SB]; then each subgroup's fragment of C on its way to `finish`.
+var<workgroup> slice_a: array<f16, BM * SA>;
+var<workgroup> slice_b: array<f16, BK * SB>;
 var<workgroup> block_c: array<f32, GM * GN * FRAG>;
 
 // Element e of a staged slice: (row, depth) of A's and (depth, column) of B's, in the block.
@@ -55,11 +58,11 @@ fn fetch_b(b: u32, n0: u32, kb: u32, k_end: u32, e: u32) -> f32 {
 // Clamped as to_map clamps: an operand past f16's range would be inf, and inf × 0 (padding) NaN.
 fn put_a(e: u32, v: f32) {
     let at = a_at(e);
-    slice_a[at.x * BK + at.y] = f16(clamp(v, -65504.0, 65504.0));
+    slice_a[at.x * SA + at.y] = f16(clamp(v, -65504.0, 65504.0));
 }
 fn put_b(e: u32, v: f32) {
     let at = b_at(e);
-    slice_b[at.x * BN + at.y] = f16(clamp(v, -65504.0, 65504.0));
+    slice_b[at.x * SB + at.y] = f16(clamp(v, -65504.0, 65504.0));
 }
 
 // With PREFETCH, each invocation holds its elements of the next slice in registers.
