@@ -5,12 +5,11 @@
 #
 # A 15-minute lease holds the machine's start (about 40 s on 2026-11-27) and about 800 s of
 # calls; a machine left idle for 30 s is gone. Measured on an H200 (2026-11-27), before the
-# step phase's raster-block and split-list runs were added (about 30 s more now; its block
-# layouts are a phase of their own): step 45 s, peer-synthetic 85 s (65 of them gsplat's CUDA
-# build), tests 55 s, peer-train 250 s
-# with gsplat built (plus four benches of at most 20 s after the peer now; peer-train builds
-# gsplat when peer-synthetic has not). The default phases fit one call of BUDGET=540, peer-train
-# before tests so the phase the call is for starts with room to spare. A second call made at
+# step phase's raster-block and split-list runs were added (its block layouts are a phase of
+# their own now): step 45 s, peer-synthetic 85 s (65 of them gsplat's CUDA build), tests 55 s,
+# peer-train 250 s with gsplat built (plus four benches of at most 20 s after the peer now;
+# peer-train builds gsplat when peer-synthetic has not). The default phases fit one call of
+# BUDGET=540, peer-train before tests so the phase the call is for starts with room to spare. A second call made at
 # once fits train-split and layouts (`BUDGET=250 ... train-split layouts`); peer-synthetic
 # (#11's 1M-Gaussian figure, met on 2026-11-27) only where the lease has room left.
 #
@@ -32,13 +31,14 @@
 #                   (COCOG_RASTER_SPLIT=auto); then at 400×300 on the same Gaussians the 3dgs
 #                   step (each of those settings, and 4 chunks) and the cocog step (what a step
 #                   of #12's full-size gate costs), F on the f32 products and on tensor cores
-#                   in the default block layout                              ~75 s on an H200
+#                   in the default block layout            ~90 s on an H200 (an estimate)
 #   layouts         the cocog step at 400×300 with F on tensor cores in each other block layout
-#                   (COCOG_COOP_BLOCK: wider blocks, deeper slices, prefetching, skewed rows);
+#                   (COCOG_COOP_BLOCK: wider blocks, deeper slices, prefetching, skewed rows)
+#                   on step's Gaussians (trained first where step has not run on the machine);
 #                   then, where DEV has gemm-bench (`cargo bench --bench gemm --no-run`,
 #                   stripped), F's 3×3 layer as a plain GEMM at 100×75 and 400×300 on the f32
 #                   tiled product and on tensor cores in every layout
-#                   (COCOG_COOPERATIVE_MATRIX=1)                                         ~90 s
+#                   (COCOG_COOPERATIVE_MATRIX=1)               ~100 s (an estimate; +15 s training)
 #   peer-synthetic  #11: `cocog bench --synthetic 1000000 --size 1920x1080` (and with --zoom 3,
 #                   most Gaussians culled, per kernel), then gsplat on the same Gaussians and
 #                   cameras (peer_gsplat.py workload)                             ~20 s + gsplat build (65 s)
@@ -125,18 +125,29 @@ gsplat_ready() {
 }
 
 # The Gaussians step and layouts bench on: a 5000-iteration 3dgs run on dev-table at 100×75,
-# trained once per machine.
+# trained once per machine (a later call reuses it, and says so). Fails without a model.
 step_model() {
     local model="$work/step-model"
-    [[ -f "$model/gaussians.ply" ]] || bounded 120 "$cocog" train "$work/in-dev-table" \
-        -o "$model" --downscale 4 --method 3dgs --iterations 5000 --checkpoint-every 0 -q \
-        --force >>"$log" 2>&1
+    if [[ -f "$model/gaussians.ply" ]]; then
+        echo "-- reusing the step model trained earlier on this machine" >>"$log"
+    else
+        bounded 120 "$cocog" train "$work/in-dev-table" -o "$model" --downscale 4 \
+            --method 3dgs --iterations 5000 --checkpoint-every 0 -q --force >>"$log" 2>&1
+    fi
+    if [[ ! -f "$model/gaussians.ply" ]]; then
+        echo "-- the step model did not train: no benches on it" >>"$log"
+        return 1
+    fi
     echo "$model"
 }
 
+# `env` without the caller's code-path switches: each bench row sets its own.
+clean_env=(env -u COCOG_F_CONV -u COCOG_NO_F16 -u COCOG_COOPERATIVE_MATRIX -u COCOG_COOP_BLOCK
+    -u COCOG_RASTER_BLOCK -u COCOG_RASTER_SPLIT)
+
 phase_step() {
     local model
-    model=$(step_model)
+    model=$(step_model) || return 1
     local m vars
     for m in 3dgs cocog cocog-tiled cocog-f32 cocog-coop 3dgs-b8 cocog-b8 3dgs-split cocog-split; do
         echo "-- $m step on the model's Gaussians" >>"$log"
@@ -148,7 +159,7 @@ phase_step() {
         [[ $m == *-b8 ]] && vars+=(COCOG_RASTER_BLOCK=8)
         # The compositing backward walking each tile's list in chunks (RasterSplit::Auto).
         [[ $m == *-split ]] && vars+=(COCOG_RASTER_SPLIT=auto)
-        bounded 60 env "${vars[@]}" "$cocog" bench "$work/in-dev-table" --downscale 4 \
+        bounded 60 "${clean_env[@]}" "${vars[@]}" "$cocog" bench "$work/in-dev-table" --downscale 4 \
             --resume "$model" --method "${m%%-*}" --iterations 100 --warmup 10 --kernels \
             >>"$log" 2>&1
     done
@@ -158,7 +169,7 @@ phase_step() {
     local c
     for c in "${raster_settings[@]}"; do
         echo "-- 3dgs step at 400×300 on the model's Gaussians, $c" >>"$log"
-        bounded 60 env -u COCOG_RASTER_SPLIT -u COCOG_RASTER_BLOCK $c "$cocog" bench "$work/in-dev-table" --downscale 1 \
+        bounded 60 "${clean_env[@]}" $c "$cocog" bench "$work/in-dev-table" --downscale 1 \
             --resume "$model" --method 3dgs --iterations 100 --warmup 10 --kernels >>"$log" 2>&1
     done
     cocog_full_size "$model" gemm:4x4 coop:4x4
@@ -171,7 +182,7 @@ cocog_full_size() {
     shift
     for m in "$@"; do
         echo "-- cocog step at 400×300 on the model's Gaussians, COCOG_F_CONV=${m%%:*}$([[ $m == coop* ]] && echo " block ${m#*:}")" >>"$log"
-        bounded 60 env COCOG_F_CONV=${m%%:*} COCOG_COOP_BLOCK=${m#*:} \
+        bounded 60 "${clean_env[@]}" COCOG_F_CONV=${m%%:*} COCOG_COOP_BLOCK=${m#*:} \
             COCOG_COOPERATIVE_MATRIX=$([[ $m == coop* ]] && echo 1 || echo 0) \
             "$cocog" bench "$work/in-dev-table" --downscale 1 --resume "$model" --method cocog \
             --iterations 30 --warmup 5 >>"$log" 2>&1
@@ -182,7 +193,7 @@ cocog_full_size() {
 # where DEV has gemm-bench, as a bare GEMM at 100×75 and 400×300.
 phase_layouts() {
     local model
-    model=$(step_model)
+    model=$(step_model) || return 1
     cocog_full_size "$model" coop:4x8 coop:4x16 coop:4x8k4 coop:8x8 coop:4x4p coop:4x8p \
         coop:4x4s coop:4x8s coop:4x4ps coop:4x8ps
     if [[ -x "$work/gemm-bench" ]]; then
@@ -230,7 +241,7 @@ phase_peer_train() {
     local c
     for c in "${raster_settings[@]}"; do
         echo "-- 3dgs step on the trained model, $c" >>"$log"
-        bounded 20 env -u COCOG_RASTER_SPLIT -u COCOG_RASTER_BLOCK $c "$cocog" bench "$work/in-sharp-dev" --resume "$out" \
+        bounded 20 "${clean_env[@]}" $c "$cocog" bench "$work/in-sharp-dev" --resume "$out" \
             --method 3dgs --iterations 200 --warmup 20 --kernels >>"$log" 2>&1
     done
 }
@@ -280,7 +291,7 @@ while ((i < ${#phases[@]})); do
     i=$((i + 1))
     case "$p" in
         step) run_phase step 120 ;;
-        layouts) run_phase layouts 120 ;;
+        layouts) run_phase layouts 130 ;;
         peer-synthetic) run_phase peer-synthetic 165 ;;
         peer-train) run_phase peer-train 375 ;;
         train-split) run_phase train-split 120 ;;

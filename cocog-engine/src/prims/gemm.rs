@@ -144,9 +144,9 @@ impl OperandScales {
 /// accumulating `fragments` (along M, along N), from staged slices `depth` fragments deep;
 /// with `prefetch`, each invocation loads its share of the next slice into registers before
 /// the current slice's products, so the loads' latency overlaps them; `pad` halves more per
-/// staged row skew the rows across workgroup-memory banks (unpadded, the 64- and 128-byte rows
-/// of NVIDIA's slices start in the same banks, so a fragment's rows conflict; 8 halves keep
-/// every row 16-byte aligned, as cooperative loads require). Bigger blocks share each
+/// staged row skew the rows across workgroup-memory banks (unpadded, NVIDIA's slices have rows
+/// of 64 bytes in A and 128 or 256 in B, which start in the same banks, so a fragment's rows
+/// conflict; 8 halves keep every row 16-byte aligned, as cooperative loads require). Bigger blocks share each
 /// staged slice among more products; more fragments per subgroup give the tensor cores more
 /// work per load. Which is fastest is the GPU's to say (`cargo bench
 /// --bench gemm` times every named layout), so the default stays the first one until a device
