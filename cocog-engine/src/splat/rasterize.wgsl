@@ -2,7 +2,7 @@
 // from the host) and image, one thread per pixel. Each batch of up to SUB² projected Gaussians
 // of the tile's list is staged in shared memory by all threads; the workgroup stops once every
 // pixel's transmittance has run out. A pixel's result does not depend on SUB.
-// With `splits` S > 1 the backward walks each tile's list in S chunks, each its own workgroup:
+// With `splits` S > 1 (the host then compiles SPLIT in) the backward walks each tile's list in S chunks, each its own workgroup:
 // one long list would otherwise be one workgroup's serial walk while the GPU idles. So each
 // pixel records what the backward of a chunk starts from: at every chunk boundary it reached
 // still compositing, the transmittance and the colour and depth in front (slot k − 1 for
@@ -63,7 +63,7 @@ fn rasterize(
     // Chunks of `chunk` Gaussians (the backward's split); no boundary when unsplit.
     let chunk = max(params.min_chunk, (range.y - range.x + params.splits - 1u) / params.splits);
     var boundary = 0xffffffffu;
-    if (params.splits > 1u && inside) {
+    if (SPLIT && inside) {
         boundary = range.x + chunk;
     }
     var slot = 0u;
@@ -100,7 +100,7 @@ fn rasterize(
         workgroupBarrier();
         let n = min(BATCH, range.y - start);
         for (var j = 0u; j < n && !done; j++) {
-            if (start + j == boundary) {
+            if (SPLIT && start + j == boundary) {
                 chunk_state[slot * params.pixels + pix] = vec4<f32>(color, t);
                 chunk_depth[slot * params.pixels + pix] = depth;
                 slot += 1u;
@@ -131,7 +131,7 @@ fn rasterize(
         }
     }
     if (inside) {
-        if (params.splits > 1u) {
+        if (SPLIT) {
             let last_slot = (params.splits - 1u) * params.pixels + pix;
             chunk_state[last_slot] = vec4<f32>(color, t);
             chunk_depth[last_slot] = depth;

@@ -64,6 +64,9 @@ pub struct Renderer {
     tile_ranges: Kernel,
     check_capacity: Kernel,
     rasterize: Kernel,
+    /// The compositing forward that also records chunk state for a split backward, made on
+    /// first use: unsplit, the forward's inner loop carries no boundary test.
+    rasterize_split: OnceLock<Kernel>,
     /// The compositing backward's source and its two builds, made on first use: with the depth
     /// channel (`[1]`) and without it (`[0]`).
     rasterize_backward_src: String,
@@ -90,6 +93,16 @@ pub enum RasterSplit {
     /// `AUTO_MIN_CHUNK` Gaussians: a chunk's workgroup pays its set-up (per-pixel loads,
     /// barriers) however few Gaussians it walks.
     Auto,
+}
+
+impl RasterSplit {
+    /// The shortest chunk but a list's last.
+    fn min_chunk(self) -> u32 {
+        match self {
+            Self::Fixed(_) => 1,
+            Self::Auto => AUTO_MIN_CHUNK,
+        }
+    }
 }
 
 /// Shortest chunk `RasterSplit::Auto` cuts a list into.
@@ -192,7 +205,8 @@ impl Renderer {
             emit_keys: Kernel::new(ctx, &tiles, "emit_keys"),
             tile_ranges: Kernel::new(ctx, &tiles, "tile_ranges"),
             check_capacity: Kernel::new(ctx, &tiles, "check_capacity"),
-            rasterize: Self::rasterize_kernel(ctx, block),
+            rasterize: Self::rasterize_kernel(ctx, block, false),
+            rasterize_split: OnceLock::new(),
             rasterize_backward_src,
             rasterize_backward: Default::default(),
             binding_limit: None,
@@ -465,14 +479,17 @@ impl Renderer {
             splits,
             chunk_state: ws.buffer(ctx, "chunk state", chunk_pixels * 16 * u64::from(splits)),
             chunk_depth: ws.buffer(ctx, "chunk depth", chunk_pixels * 4 * u64::from(splits)),
-            min_chunk: match self.raster_split {
-                RasterSplit::Fixed(_) => 1,
-                RasterSplit::Auto => AUTO_MIN_CHUNK,
-            },
+            min_chunk: self.raster_split.min_chunk(),
         };
         let raster = rec.uniform(&Self::raster_params(batch, splits, state.min_chunk));
         let per_tile = 16 / self.raster_block;
-        self.rasterize.dispatch(
+        let rasterize = if splits > 1 {
+            self.rasterize_split
+                .get_or_init(|| Self::rasterize_kernel(ctx, self.raster_block, true))
+        } else {
+            &self.rasterize
+        };
+        rasterize.dispatch(
             rec,
             &[
                 (0, &raster),
@@ -497,7 +514,8 @@ impl Renderer {
     /// sides are taken as 16.
     pub fn with_raster_block(mut self, ctx: &GpuContext, side: u32) -> Self {
         self.raster_block = if side == 8 { 8 } else { 16 };
-        self.rasterize = Self::rasterize_kernel(ctx, self.raster_block);
+        self.rasterize = Self::rasterize_kernel(ctx, self.raster_block, false);
+        self.rasterize_split = OnceLock::new();
         self.rasterize_backward = Default::default();
         self
     }
@@ -509,9 +527,9 @@ impl Renderer {
         self
     }
 
-    fn rasterize_kernel(ctx: &GpuContext, block: u32) -> Kernel {
+    fn rasterize_kernel(ctx: &GpuContext, block: u32, split: bool) -> Kernel {
         let src = format!(
-            "const SUB: u32 = {block}u;\n{}",
+            "const SUB: u32 = {block}u;\nconst SPLIT: bool = {split};\n{}",
             include_str!("rasterize.wgsl")
         );
         Kernel::new(ctx, &shader(ctx, "rasterize", &src), "rasterize")
