@@ -169,7 +169,7 @@ fn gpu_case(mode: CompositeMode, channels: usize, images: usize, h: usize, w: us
         );
     }
     for precision in precisions {
-        for path in [ConvPath::Gemm, ConvPath::Tiled] {
+        for path in [ConvPath::Gemm, ConvPath::Tiled, ConvPath::Winograd] {
             let case = (path, precision, mode);
             let maps = gpu_case_on(case, None, None, channels, images, h, w, seed);
             gpu_case_on(case, Some(two), maps.as_ref(), channels, images, h, w, seed);
@@ -401,6 +401,13 @@ fn gpu_uniform_mode_is_the_mean() {
 #[test]
 fn gpu_learned_mode_past_one_channel_block_matches_the_reference() {
     gpu_case(CompositeMode::Learned, 72, 3, 9, 8, 8);
+}
+
+/// Two channel blocks, and maps of more than one Winograd workgroup's 8×8 output tiles along
+/// both sides (10 × 9 tiles), the last ones cut by the map's odd height.
+#[test]
+fn gpu_learned_mode_past_one_block_of_tiles_matches_the_reference() {
+    gpu_case(CompositeMode::Learned, 72, 2, 19, 18, 11);
 }
 
 /// Maps large enough that the head's weight gradient splits 327,680 positions into 1024 ranges

@@ -3,6 +3,7 @@
 
 use super::conv_gemm::{ConvGemm, ConvLayer, MapSize, NO_BIAS};
 use super::conv_tile::ConvTile;
+use super::conv_winograd::ConvWinograd;
 use super::layout::{CompositorConfig, CompositorLayout, IN_EPS};
 use super::precision::MapPrecision;
 use crate::core::{Bind, GpuBuffer, GpuContext, Kernel, Recorder, Workspace, shader};
@@ -61,6 +62,10 @@ pub enum ConvPath {
     /// Spatially tiled direct convolutions: a block's input patch staged once per slice of
     /// channels (conv_tile.rs). As fast as the GEMMs on lavapipe; unmeasured on a GPU.
     Tiled,
+    /// The 3×3 layers' forwards and input gradients by Winograd's F(2×2, 3×3)
+    /// (conv_winograd.rs): 2.25× fewer multiply-adds than the implicit GEMMs; the 5×5 layer
+    /// and every weight gradient stay implicit GEMMs.
+    Winograd,
     /// The implicit GEMMs on cooperative matrices (tensor cores) with f16 operands, where the
     /// context enabled them (`COCOG_COOPERATIVE_MATRIX=1`), else `Gemm`. Experimental: never
     /// run on a GPU yet.
@@ -68,12 +73,14 @@ pub enum ConvPath {
 }
 
 impl ConvPath {
-    /// `COCOG_F_CONV=tiled` picks `Tiled`, `coop` picks `Coop`, anything else `Gemm`: a switch
+    /// `COCOG_F_CONV=tiled` picks `Tiled`, `winograd` `Winograd`, `coop` `Coop`, anything else
+    /// `Gemm`: a switch
     /// for timing them against each other on a GPU (`cocog bench --method cocog --kernels`).
     pub fn from_env() -> Self {
         match std::env::var("COCOG_F_CONV").as_deref() {
             Ok("tiled") => ConvPath::Tiled,
             Ok("coop") => ConvPath::Coop,
+            Ok("winograd") => ConvPath::Winograd,
             _ => ConvPath::Gemm,
         }
     }
@@ -125,6 +132,8 @@ pub struct Compositor {
     gemm: ConvGemm,
     /// Their forwards and input gradients spatially tiled, with `ConvPath::Tiled`.
     tile: Option<ConvTile>,
+    /// Their 3×3 forwards and input gradients by Winograd, with `ConvPath::Winograd`.
+    winograd: Option<ConvWinograd>,
     /// The one-channel head's forward and weight gradient, direct: a 64-row GEMM tile would
     /// compute 63 rows for nothing.
     conv: Kernel,
@@ -174,6 +183,7 @@ impl Compositor {
             precision,
             gemm: ConvGemm::new(ctx, config.channels, precision, path == ConvPath::Coop),
             tile: (path == ConvPath::Tiled).then(|| ConvTile::new(ctx, precision)),
+            winograd: (path == ConvPath::Winograd).then(|| ConvWinograd::new(ctx, precision)),
             conv: Kernel::new(ctx, &conv, "conv_forward"),
             conv_weight_parts: Kernel::new(ctx, &conv, "conv_weight_grad_part"),
             conv_weight_sum: Kernel::new(ctx, &conv, "conv_weight_grad_sum"),
@@ -356,6 +366,19 @@ impl Compositor {
         }
     }
 
+    /// The Winograd kernels where they pay for a 3×3 pass: one that sums fewer channels than a
+    /// staged slice (the head's input gradient sums one) would multiply zeros.
+    fn winograd_for(
+        &self,
+        (cin, cout, ks, _, _): ConvLayer,
+        input_grad: bool,
+    ) -> Option<&ConvWinograd> {
+        let summed = if input_grad { cout } else { cin };
+        self.winograd
+            .as_ref()
+            .filter(|_| ks == 3 && summed >= ConvWinograd::MIN_SUMMED)
+    }
+
     /// A wide layer's forward on the chosen path.
     #[allow(clippy::too_many_arguments)]
     fn conv(
@@ -369,6 +392,9 @@ impl Compositor {
         output: &dyn Bind,
         rgba: bool,
     ) {
+        if let Some(w) = self.winograd_for(layer, false).filter(|_| !rgba) {
+            return w.forward(rec, ws, layer, size, params, input, output);
+        }
         match &self.tile {
             Some(t) => t.forward(rec, layer, size, params, input, output, rgba),
             None => self
@@ -389,6 +415,9 @@ impl Compositor {
         v_out: &dyn Bind,
         v_in: &dyn Bind,
     ) {
+        if let Some(w) = self.winograd_for(layer, true) {
+            return w.input_grad(rec, ws, layer, size, params, v_out, v_in);
+        }
         match &self.tile {
             Some(t) => t.input_grad(rec, layer, size, params, v_out, v_in),
             None => self

@@ -12,6 +12,7 @@
 mod composite;
 mod conv_gemm;
 mod conv_tile;
+mod conv_winograd;
 mod layout;
 mod precision;
 pub mod reference;

@@ -1,0 +1,227 @@
+// F's 3×3 convolutions (stride 1, zero padding 1) by Winograd's minimal filtering F(2×2, 3×3):
+// an output tile of 2×2 pixels is Aᵀ [Σ_c (G g_c Gᵀ) ⊙ (Bᵀ d_c B)] A, where d_c is the tile's
+// 4×4 input patch of channel c and g_c the 3×3 kernel. Per tile and output channel that is
+// 16 products per summed channel where the direct convolution needs 36, so the 16 positions ξ
+// of the 4×4 transformed tile are 16 matrix products of (outputs × channels) by
+// (channels × tiles), each a quarter of the direct one's depth.
+//
+// `winograd_weights` writes U_ξ = (G g Gᵀ)_ξ as [ξ][summed channel][output channel] (the
+// weights change every step, so every pass transforms them first). `winograd_conv` gives a
+// workgroup 64 output channels × a block of 8×8 tiles (16×16 pixels) of one image; it walks
+// ξ outermost, so it holds one 64×64 block of the product at a time (a thread's 4 channels ×
+// 4 tiles), and folds each finished ξ into its 2×2 outputs at once (Aᵀ's entries are 0 and
+// ±1). Bᵀ d B is computed while a slice of channels loads: each of its entries is a signed sum
+// of 4 patch values.
+//
+// The same kernels compute a 3×3 layer's input gradient, the convolution of the output
+// gradient with the kernel transposed (in ↔ out) and flipped (TRANSPOSED). The prelude
+// defines in_t, out_t and to_out (see conv_tile.wgsl). Maps are [image][channel][y][x].
+
+struct Wino {
+    width: u32,
+    height: u32,
+    // Output channels (M) and summed channels (C) of this pass.
+    outputs: u32,
+    summed: u32,
+    w_off: u32,
+    // 0xffffffff: none.
+    bias_off: u32,
+    // 1: the input gradient (weights read as W[c][m] flipped, no bias).
+    transposed: u32,
+    // The first image's index in the input (MapSize::image0).
+    image0: u32,
+    tiles_x: u32,
+    tiles_y: u32,
+    pad0: u32,
+    pad1: u32,
+}
+
+@group(0) @binding(0) var<uniform> wn: Wino;
+@group(0) @binding(1) var<storage, read> params: array<f32>;
+// [ξ][c][m]: written by winograd_weights, read by winograd_conv.
+@group(0) @binding(2) var<storage, read_write> u_mat: array<f32>;
+@group(0) @binding(3) var<storage, read> input: array<in_t>;
+@group(0) @binding(4) var<storage, read_write> output: array<out_t>;
+
+// The kernel this pass correlates with: tap k = 3·ky + kx of output m, summed channel c.
+fn kernel_tap(m: u32, c: u32, k: u32) -> f32 {
+    if wn.transposed == 1u {
+        // The layer's weights are W[c][m][tap] with m its input channels.
+        return params[wn.w_off + (c * wn.outputs + m) * 9u + (8u - k)];
+    }
+    return params[wn.w_off + (m * wn.summed + c) * 9u + k];
+}
+
+// G·(r0, r1, r2) with G = [1 0 0; ½ ½ ½; ½ −½ ½; 0 0 1].
+fn g_times(r: vec3<f32>) -> vec4<f32> {
+    return vec4<f32>(r.x, 0.5 * (r.x + r.y + r.z), 0.5 * (r.x - r.y + r.z), r.z);
+}
+
+@compute @workgroup_size(64)
+fn winograd_weights(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let t = gid.x;
+    if t >= wn.outputs * wn.summed {
+        return;
+    }
+    let m = t % wn.outputs;
+    let c = t / wn.outputs;
+    // G g: column kx of g through G, then each row of the result through G again (· Gᵀ).
+    var cols: array<vec4<f32>, 3>;
+    for (var kx = 0u; kx < 3u; kx++) {
+        cols[kx] = g_times(vec3<f32>(
+            kernel_tap(m, c, kx),
+            kernel_tap(m, c, 3u + kx),
+            kernel_tap(m, c, 6u + kx),
+        ));
+    }
+    for (var i = 0u; i < 4u; i++) {
+        let row = g_times(vec3<f32>(cols[0][i], cols[1][i], cols[2][i]));
+        for (var j = 0u; j < 4u; j++) {
+            u_mat[((i * 4u + j) * wn.summed + c) * wn.outputs + m] = row[j];
+        }
+    }
+}
+
+// Row i of Bᵀ = [1 0 −1 0; 0 1 1 0; 0 −1 1 0; 0 1 0 −1] as (first column, its sign, second
+// column, its sign): every row has two entries.
+fn bt_row(i: u32) -> vec4<i32> {
+    switch i {
+        case 0u: { return vec4<i32>(0, 1, 2, -1); }
+        case 1u: { return vec4<i32>(1, 1, 2, 1); }
+        case 2u: { return vec4<i32>(1, -1, 2, 1); }
+        default: { return vec4<i32>(1, 1, 3, -1); }
+    }
+}
+
+// Rows of Aᵀ = [1 1 1 0; 0 1 −1 −1], entry i of each.
+fn at_col(i: u32) -> vec2<f32> {
+    switch i {
+        case 0u: { return vec2<f32>(1.0, 0.0); }
+        case 1u: { return vec2<f32>(1.0, 1.0); }
+        case 2u: { return vec2<f32>(1.0, -1.0); }
+        default: { return vec2<f32>(0.0, -1.0); }
+    }
+}
+
+fn input_at(b: u32, c: u32, y: i32, x: i32) -> f32 {
+    if y < 0 || x < 0 || y >= i32(wn.height) || x >= i32(wn.width) {
+        return 0.0;
+    }
+    let plane = (b + wn.image0) * wn.summed + c;
+    return f32(input[(plane * wn.height + u32(y)) * wn.width + u32(x)]);
+}
+
+const WG: u32 = 256u;
+// Output channels per workgroup, tiles per side of its block, channels per staged slice.
+const BM: u32 = 64u;
+const BT: u32 = 8u;
+const BN: u32 = BT * BT;
+const BK: u32 = 32u;
+
+// [k][m / 4] and [k][tile / 4]: a thread's 4 channels (tiles) of one k are one vec4.
+var<workgroup> tile_a: array<vec4<f32>, BK * BM / 4u>;
+var<workgroup> tile_b: array<vec4<f32>, BK * BN / 4u>;
+
+fn store_tile(b: u32, m: u32, tile: vec2<u32>, v: vec4<f32>) {
+    if m >= wn.outputs || tile.x >= wn.tiles_y || tile.y >= wn.tiles_x {
+        return;
+    }
+    var bias = 0.0;
+    if wn.bias_off != 0xffffffffu && wn.transposed == 0u {
+        bias = params[wn.bias_off + m];
+    }
+    let plane = (b * wn.outputs + m) * wn.height;
+    let y = 2u * tile.x;
+    let x = 2u * tile.y;
+    let right = x + 1u < wn.width;
+    output[(plane + y) * wn.width + x] = to_out(v.x + bias);
+    if right {
+        output[(plane + y) * wn.width + x + 1u] = to_out(v.y + bias);
+    }
+    if y + 1u < wn.height {
+        output[(plane + y + 1u) * wn.width + x] = to_out(v.z + bias);
+        if right {
+            output[(plane + y + 1u) * wn.width + x + 1u] = to_out(v.w + bias);
+        }
+    }
+}
+
+@compute @workgroup_size(WG)
+fn winograd_conv(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    // Grid: x blocks of tile columns, y blocks of tile rows × 64-channel blocks, z images.
+    let blocks_y = (wn.tiles_y + BT - 1u) / BT;
+    let t0 = vec2<u32>((wg.y % blocks_y) * BT, wg.x * BT);
+    let m0 = (wg.y / blocks_y) * BM;
+    let b = wg.z;
+    // Thread: channels m0 + 4·ty + r, tiles 4·tx + t of the block (one row of the block).
+    let ty = lid / 16u;
+    let tx = lid % 16u;
+    // y[4·r + t]: the 2×2 outputs (row-major) of channel r and tile t.
+    var y: array<vec4<f32>, 16>;
+    for (var q = 0u; q < 16u; q++) {
+        y[q] = vec4<f32>(0.0);
+    }
+    for (var xi = 0u; xi < 16u; xi++) {
+        let ri = bt_row(xi / 4u);
+        let rj = bt_row(xi % 4u);
+        var acc0 = vec4<f32>(0.0);
+        var acc1 = vec4<f32>(0.0);
+        var acc2 = vec4<f32>(0.0);
+        var acc3 = vec4<f32>(0.0);
+        for (var c0 = 0u; c0 < wn.summed; c0 += BK) {
+            for (var e = lid; e < BK * BM; e += WG) {
+                let mm = e % BM;
+                let kk = e / BM;
+                var va = 0.0;
+                if m0 + mm < wn.outputs && c0 + kk < wn.summed {
+                    va = u_mat[(xi * wn.summed + c0 + kk) * wn.outputs + m0 + mm];
+                }
+                tile_a[kk * (BM / 4u) + mm / 4u][mm % 4u] = va;
+            }
+            for (var e = lid; e < BK * BN; e += WG) {
+                let n = e % BN;
+                let kk = e / BN;
+                var vb = 0.0;
+                if c0 + kk < wn.summed {
+                    // The patch's top-left corner: the tile's first output moved by −pad.
+                    let py = i32(2u * (t0.x + n / BT)) - 1;
+                    let px = i32(2u * (t0.y + n % BT)) - 1;
+                    let c = c0 + kk;
+                    let top = f32(rj.y) * input_at(b, c, py + ri.x, px + rj.x)
+                        + f32(rj.w) * input_at(b, c, py + ri.x, px + rj.z);
+                    let bottom = f32(rj.y) * input_at(b, c, py + ri.z, px + rj.x)
+                        + f32(rj.w) * input_at(b, c, py + ri.z, px + rj.z);
+                    vb = f32(ri.y) * top + f32(ri.w) * bottom;
+                }
+                tile_b[kk * (BN / 4u) + n / 4u][n % 4u] = vb;
+            }
+            workgroupBarrier();
+            for (var kk = 0u; kk < BK; kk++) {
+                let a = tile_a[kk * (BM / 4u) + ty];
+                let bv = tile_b[kk * (BN / 4u) + tx];
+                acc0 += a.x * bv;
+                acc1 += a.y * bv;
+                acc2 += a.z * bv;
+                acc3 += a.w * bv;
+            }
+            workgroupBarrier();
+        }
+        // Output (r, s) of a tile takes Aᵀ[r][i]·Aᵀ[s][j] of position ξ = (i, j).
+        let ai = at_col(xi / 4u);
+        let aj = at_col(xi % 4u);
+        let k = vec4<f32>(ai.x * aj.x, ai.x * aj.y, ai.y * aj.x, ai.y * aj.y);
+        for (var t = 0u; t < 4u; t++) {
+            y[t] += k * acc0[t];
+            y[4u + t] += k * acc1[t];
+            y[8u + t] += k * acc2[t];
+            y[12u + t] += k * acc3[t];
+        }
+    }
+    for (var r = 0u; r < 4u; r++) {
+        for (var t = 0u; t < 4u; t++) {
+            let n = 4u * tx + t;
+            let tile = vec2<u32>(t0.x + n / BT, t0.y + n % BT);
+            store_tile(b, m0 + 4u * ty + r, tile, y[4u * r + t]);
+        }
+    }
+}
