@@ -23,15 +23,16 @@
 #   step            #12's step ratio: a 5000-iteration 3dgs run on dev-table at 100×75 gives the
 #                   Gaussians, then `cocog bench --resume` times a 3dgs step and a cocog step
 #                   (the default variant, F on) on them, the latter with F's convolutions as
-#                   implicit GEMMs and as tiled kernels (COCOG_F_CONV=tiled), and with F's maps
+#                   implicit GEMMs, as tiled kernels (COCOG_F_CONV=tiled) and with its 3×3
+#                   layers by Winograd (COCOG_F_CONV=winograd), and with F's maps
 #                   in f32 (COCOG_NO_F16=1) as well as f16, with the per-kernel split
 #                   (--kernels), and on tensor cores (COCOG_F_CONV=coop, f16 operands,
 #                   experimental), and both steps compositing in 8×8 blocks
 #                   (COCOG_RASTER_BLOCK=8) or with the backward's tile lists split
 #                   (COCOG_RASTER_SPLIT=auto); then at 400×300 on the same Gaussians the 3dgs
 #                   step (each of those settings, and 4 chunks) and the cocog step (what a step
-#                   of #12's full-size gate costs), F on the f32 products and on tensor cores
-#                   in the default block layout            ~90 s on an H200 (an estimate)
+#                   of #12's full-size gate costs), F on the f32 products, by Winograd and on
+#                   tensor cores in the default block layout  ~105 s on an H200 (an estimate)
 #   layouts         the cocog step at 400×300 with F on tensor cores in each other block layout
 #                   (COCOG_COOP_BLOCK: wider blocks, deeper slices, prefetching, skewed rows)
 #                   on step's Gaussians (trained first where step has not run on the machine);
@@ -149,10 +150,11 @@ phase_step() {
     local model
     model=$(step_model) || return 1
     local m vars
-    for m in 3dgs cocog cocog-tiled cocog-f32 cocog-coop 3dgs-b8 cocog-b8 3dgs-split cocog-split; do
+    for m in 3dgs cocog cocog-tiled cocog-winograd cocog-f32 cocog-coop 3dgs-b8 cocog-b8 3dgs-split cocog-split; do
         echo "-- $m step on the model's Gaussians" >>"$log"
         vars=(COCOG_F_CONV=gemm)
         [[ $m == *-tiled ]] && vars=(COCOG_F_CONV=tiled)
+        [[ $m == *-winograd ]] && vars=(COCOG_F_CONV=winograd)
         [[ $m == *-coop ]] && vars=(COCOG_F_CONV=coop COCOG_COOPERATIVE_MATRIX=1)
         [[ $m == *-f32 ]] && vars+=(COCOG_NO_F16=1)
         # Compositing in 8×8 blocks of a tile (four times the workgroups on a 100×75 frame).
@@ -172,11 +174,12 @@ phase_step() {
         bounded 60 "${clean_env[@]}" $c "$cocog" bench "$work/in-dev-table" --downscale 1 \
             --resume "$model" --method 3dgs --iterations 100 --warmup 10 --kernels >>"$log" 2>&1
     done
-    cocog_full_size "$model" gemm:4x4 coop:4x4
+    cocog_full_size "$model" gemm:4x4 winograd:4x4 coop:4x4
 }
 
-# The cocog step at 400×300 on model $1 with F as each of $2...: gemm:4x4 (the f32 products) or
-# coop:LAYOUT (tensor cores in that CoopBlock layout).
+# The cocog step at 400×300 on model $1 with F as each of $2...: gemm:4x4 (the f32 products),
+# winograd:4x4 (its 3×3 layers by Winograd) or coop:LAYOUT (tensor cores in that CoopBlock
+# layout).
 cocog_full_size() {
     local model=$1 m
     shift

@@ -54,7 +54,7 @@ struct BlendU {
 }
 
 /// How F's wide convolutions run their forwards and input gradients (their weight gradients are
-/// implicit GEMMs either way).
+/// implicit GEMMs but with `Winograd`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ConvPath {
     /// Implicit GEMMs: the im2col matrix gathered while a tile loads (conv_gemm.rs).
@@ -62,9 +62,9 @@ pub enum ConvPath {
     /// Spatially tiled direct convolutions: a block's input patch staged once per slice of
     /// channels (conv_tile.rs). As fast as the GEMMs on lavapipe; unmeasured on a GPU.
     Tiled,
-    /// The 3×3 layers' forwards and input gradients by Winograd's F(2×2, 3×3)
+    /// The wide 3×3 layer's forward, input and weight gradients by Winograd's F(2×2, 3×3)
     /// (conv_winograd.rs): 2.25× fewer multiply-adds than the implicit GEMMs; the 5×5 layer
-    /// and every weight gradient stay implicit GEMMs.
+    /// and passes summing fewer channels than a slice stay implicit GEMMs.
     Winograd,
     /// The implicit GEMMs on cooperative matrices (tensor cores) with f16 operands, where the
     /// context enabled them (`COCOG_COOPERATIVE_MATRIX=1`), else `Gemm`. Experimental: never
@@ -564,7 +564,10 @@ impl Compositor {
         self.weight_grads(rec, ws, head, &l2.1, v_logits, v_params, size);
         self.conv_input_grad(rec, ws, head, size, params, v_logits, v_y);
         self.relu_norm_backward(rec, l2, v_y, v_z, grad_stats, planes, pixels);
-        g.weight_grad(rec, ws, c2, local, &l1.1, v_z, v_params, false);
+        match self.winograd_for(c2, false) {
+            Some(w) => w.weight_grad(rec, ws, c2, local, &l1.1, v_z, v_params),
+            None => g.weight_grad(rec, ws, c2, local, &l1.1, v_z, v_params, false),
+        }
         self.conv_input_grad(rec, ws, c2, local, params, v_z, v_y);
         self.relu_norm_backward(rec, l1, v_y, v_z, grad_stats, planes, pixels);
         g.weight_grad(rec, ws, c1, size, renders, v_z, v_params, true);

@@ -1,6 +1,7 @@
-//! F's 3×3 convolutions and their input gradients by Winograd's F(2×2, 3×3) (conv_winograd.wgsl):
-//! 16 products per tile, output channel and summed channel where the direct convolution needs
-//! 36, so 2.25× fewer multiply-adds for the layer that holds nearly all of F's arithmetic.
+//! F's 3×3 convolutions, their input gradients (conv_winograd.wgsl) and weight gradients
+//! (conv_winograd_grad.wgsl) by Winograd's F(2×2, 3×3): 16 products per 2×2 output tile, output
+//! channel and summed channel where the direct convolution needs 36, so 2.25× fewer
+//! multiply-adds for the layer that holds nearly all of F's arithmetic.
 
 use super::conv_gemm::{ConvLayer, MapSize, NO_BIAS};
 use super::precision::MapPrecision;
@@ -9,6 +10,10 @@ use crate::core::{Bind, GpuContext, Kernel, Recorder, Workspace, shader};
 /// A workgroup's block of tiles per side and of output channels (conv_winograd.wgsl's BT, BM).
 const BLOCK_TILES: u32 = 8;
 const BLOCK_M: u32 = 64;
+/// Tiles per staged slice of the weight gradient (conv_winograd_grad.wgsl's BK), and about how
+/// many ranges it sums apart.
+const SLICE: u32 = 32;
+const TARGET_PARTS: u32 = 128;
 /// Positions of a transformed 4×4 tile.
 const POSITIONS: u64 = 16;
 
@@ -25,7 +30,10 @@ struct WinoU {
     image0: u32,
     tiles_x: u32,
     tiles_y: u32,
-    pad: [u32; 2],
+    images: u32,
+    parts: u32,
+    range: u32,
+    pad: u32,
 }
 
 #[derive(Debug)]
@@ -42,7 +50,10 @@ impl Pass {
             "{}alias in_t = {input};\nalias out_t = {output};\n\
              fn to_out(v: f32) -> out_t {{ return {convert}; }}\n{}",
             precision.prelude(),
-            include_str!("conv_winograd.wgsl")
+            concat!(
+                include_str!("conv_winograd_common.wgsl"),
+                include_str!("conv_winograd.wgsl")
+            )
         );
         let module = shader(ctx, &label, &source);
         Self {
@@ -96,11 +107,44 @@ impl Pass {
     }
 }
 
-/// The 3×3 layers' forward (stored maps in and out) and input gradient (f32 maps in and out).
+/// The weight gradient's two kernels (conv_winograd_grad.wgsl).
+#[derive(Debug)]
+struct WeightGrad {
+    part: Kernel,
+    sum: Kernel,
+}
+
+impl WeightGrad {
+    fn new(ctx: &GpuContext, precision: MapPrecision) -> Self {
+        let label = "conv winograd weight grad";
+        let source = format!(
+            "{}alias in_t = map_t;\n{}",
+            precision.prelude(),
+            concat!(
+                include_str!("conv_winograd_common.wgsl"),
+                include_str!("conv_winograd_grad.wgsl")
+            )
+        );
+        let module = shader(ctx, label, &source);
+        Self {
+            part: Kernel::labelled(ctx, &module, "winograd_weight_part", label),
+            sum: Kernel::labelled(
+                ctx,
+                &module,
+                "winograd_weight_sum",
+                &format!("{label} (sum)"),
+            ),
+        }
+    }
+}
+
+/// The 3×3 layers' forward (stored maps in and out), input gradient (f32 maps in and out) and
+/// weight gradient (a stored map and an f32 gradient in).
 #[derive(Debug)]
 pub struct ConvWinograd {
     forward: Pass,
     grad: Pass,
+    weight_grad: WeightGrad,
 }
 
 impl ConvWinograd {
@@ -111,6 +155,7 @@ impl ConvWinograd {
         Self {
             forward: Pass::new(ctx, precision, "map_t", "map_t"),
             grad: Pass::new(ctx, precision, "f32", "f32"),
+            weight_grad: WeightGrad::new(ctx, precision),
         }
     }
 
@@ -129,7 +174,10 @@ impl ConvWinograd {
             image0: size.image0,
             tiles_x: size.width.div_ceil(2),
             tiles_y: size.height.div_ceil(2),
-            pad: [0; 2],
+            images: size.images,
+            parts: 0,
+            range: 0,
+            pad: 0,
         }
     }
 
@@ -165,5 +213,44 @@ impl ConvWinograd {
         let u = Self::uniform(layer, size, true);
         self.grad
             .run(rec, ws, u, size.images, [params, v_out, v_in]);
+    }
+
+    /// The weight and bias gradients of a 3×3 `layer` from its input maps and its output's
+    /// gradient, summed over every pixel of `size.images` renders, written into `v_params`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn weight_grad(
+        &self,
+        rec: &mut Recorder,
+        ws: &mut Workspace,
+        layer: ConvLayer,
+        size: MapSize,
+        input: &dyn Bind,
+        v_out: &dyn Bind,
+        v_params: &dyn Bind,
+    ) {
+        let mut u = Self::uniform(layer, size, false);
+        let tiles = u.tiles_x * u.tiles_y * size.images;
+        // Ranges of whole staged slices, about TARGET_PARTS of them: enough workgroups to fill
+        // a GPU (16 positions each) and a partial buffer of at most TARGET_PARTS × 16 × M × C.
+        u.range = tiles
+            .div_ceil(TARGET_PARTS)
+            .next_multiple_of(SLICE)
+            .max(SLICE);
+        u.parts = tiles.div_ceil(u.range);
+        let pairs = u.outputs * u.summed;
+        let floats = (POSITIONS * u64::from(pairs) + u64::from(u.outputs)) * u64::from(u.parts);
+        let partials = ws.buffer(rec.ctx(), "winograd weight partials", floats * 4);
+        let uniform = rec.uniform(&u);
+        let blocks = u.outputs.div_ceil(BLOCK_M) * u.summed.div_ceil(BLOCK_M);
+        self.weight_grad.part.dispatch(
+            rec,
+            &[(0, &uniform), (1, input), (2, v_out), (3, &partials)],
+            [POSITIONS as u32, u.parts, blocks],
+        );
+        self.weight_grad.sum.dispatch_1d(
+            rec,
+            &[(0, &uniform), (3, &partials), (4, v_params)],
+            pairs.div_ceil(64),
+        );
     }
 }

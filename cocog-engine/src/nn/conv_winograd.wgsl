@@ -17,26 +17,6 @@
 // gradient with the kernel transposed (in ↔ out) and flipped (TRANSPOSED). The prelude
 // defines in_t, out_t and to_out (see conv_tile.wgsl). Maps are [image][channel][y][x].
 
-struct Wino {
-    width: u32,
-    height: u32,
-    // Output channels (M) and summed channels (C) of this pass.
-    outputs: u32,
-    summed: u32,
-    w_off: u32,
-    // 0xffffffff: none.
-    bias_off: u32,
-    // 1: the input gradient (weights read as W[c][m] flipped, no bias).
-    transposed: u32,
-    // The first image's index in the input (MapSize::image0).
-    image0: u32,
-    tiles_x: u32,
-    tiles_y: u32,
-    pad0: u32,
-    pad1: u32,
-}
-
-@group(0) @binding(0) var<uniform> wn: Wino;
 @group(0) @binding(1) var<storage, read> params: array<f32>;
 // [ξ][c][m]: written by winograd_weights, read by winograd_conv.
 @group(0) @binding(2) var<storage, read_write> u_mat: array<f32>;
@@ -50,11 +30,6 @@ fn kernel_tap(m: u32, c: u32, k: u32) -> f32 {
         return params[wn.w_off + (c * wn.outputs + m) * 9u + (8u - k)];
     }
     return params[wn.w_off + (m * wn.summed + c) * 9u + k];
-}
-
-// G·(r0, r1, r2) with G = [1 0 0; ½ ½ ½; ½ −½ ½; 0 0 1].
-fn g_times(r: vec3<f32>) -> vec4<f32> {
-    return vec4<f32>(r.x, 0.5 * (r.x + r.y + r.z), 0.5 * (r.x - r.y + r.z), r.z);
 }
 
 @compute @workgroup_size(64)
@@ -80,35 +55,6 @@ fn winograd_weights(@builtin(global_invocation_id) gid: vec3<u32>) {
             u_mat[((i * 4u + j) * wn.summed + c) * wn.outputs + m] = row[j];
         }
     }
-}
-
-// Row i of Bᵀ = [1 0 −1 0; 0 1 1 0; 0 −1 1 0; 0 1 0 −1] as (first column, its sign, second
-// column, its sign): every row has two entries.
-fn bt_row(i: u32) -> vec4<i32> {
-    switch i {
-        case 0u: { return vec4<i32>(0, 1, 2, -1); }
-        case 1u: { return vec4<i32>(1, 1, 2, 1); }
-        case 2u: { return vec4<i32>(1, -1, 2, 1); }
-        default: { return vec4<i32>(1, 1, 3, -1); }
-    }
-}
-
-// Rows of Aᵀ = [1 1 1 0; 0 1 −1 −1], entry i of each.
-fn at_col(i: u32) -> vec2<f32> {
-    switch i {
-        case 0u: { return vec2<f32>(1.0, 0.0); }
-        case 1u: { return vec2<f32>(1.0, 1.0); }
-        case 2u: { return vec2<f32>(1.0, -1.0); }
-        default: { return vec2<f32>(0.0, -1.0); }
-    }
-}
-
-fn input_at(b: u32, c: u32, y: i32, x: i32) -> f32 {
-    if y < 0 || x < 0 || y >= i32(wn.height) || x >= i32(wn.width) {
-        return 0.0;
-    }
-    let plane = (b + wn.image0) * wn.summed + c;
-    return f32(input[(plane * wn.height + u32(y)) * wn.width + u32(x)]);
 }
 
 const WG: u32 = 256u;
@@ -183,15 +129,8 @@ fn winograd_conv(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation
                 let kk = e / BN;
                 var vb = 0.0;
                 if c0 + kk < wn.summed {
-                    // The patch's top-left corner: the tile's first output moved by −pad.
-                    let py = i32(2u * (t0.x + n / BT)) - 1;
-                    let px = i32(2u * (t0.y + n % BT)) - 1;
-                    let c = c0 + kk;
-                    let top = f32(rj.y) * input_at(b, c, py + ri.x, px + rj.x)
-                        + f32(rj.w) * input_at(b, c, py + ri.x, px + rj.z);
-                    let bottom = f32(rj.y) * input_at(b, c, py + ri.z, px + rj.x)
-                        + f32(rj.w) * input_at(b, c, py + ri.z, px + rj.z);
-                    vb = f32(ri.y) * top + f32(ri.w) * bottom;
+                    let tile = vec2<u32>(t0.x + n / BT, t0.y + n % BT);
+                    vb = transformed_input(b, c0 + kk, tile, ri, rj);
                 }
                 tile_b[kk * (BN / 4u) + n / 4u][n % 4u] = vb;
             }

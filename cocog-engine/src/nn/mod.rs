@@ -5,7 +5,8 @@
 //! renders are averaged (`CompositeMode::Uniform`).
 //!
 //! The C-channel convolutions run as tiled implicit GEMMs (conv_gemm.rs), or their forwards and
-//! input gradients as spatially tiled direct convolutions (conv_tile.rs, `ConvPath`); the
+//! input gradients as spatially tiled direct convolutions (conv_tile.rs), or the 3×3 layer by
+//! Winograd's minimal filtering (conv_winograd.rs; `ConvPath` picks); the
 //! one-channel head, a sliver of the work, as direct kernels. The forward maps are stored in
 //! half precision where the adapter allows (precision.rs).
 

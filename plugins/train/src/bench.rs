@@ -476,7 +476,8 @@ impl BenchReport {
                 cocog_engine::nn::ConvPath::Gemm => "implicit GEMMs",
                 cocog_engine::nn::ConvPath::Tiled => "tiled (COCOG_F_CONV=tiled)",
                 cocog_engine::nn::ConvPath::Winograd => {
-                    "3×3 layers by Winograd F(2×2, 3×3) (COCOG_F_CONV=winograd)"
+                    "3×3 layers by Winograd F(2×2, 3×3), GFLOP counted as direct convolutions \
+                     (COCOG_F_CONV=winograd)"
                 }
                 cocog_engine::nn::ConvPath::Coop if self.cooperative_f16 => &format!(
                     "implicit GEMMs on tensor cores (COCOG_F_CONV=coop, block {})",

@@ -1,0 +1,177 @@
+// The weight and bias gradients of a 3×3 layer computed as conv_winograd.wgsl computes its
+// forward. With M_ξ = U_ξ V_ξ per position ξ = (i, j) of the transformed tile and
+// Y = Aᵀ M A per tile, the loss gradient reaches U_ξ as ∂U_ξ = Σ_tiles ∂M_ξ V_ξᵀ with
+// ∂M = A ∂Y Aᵀ, and the kernel as ∂g = Gᵀ ∂U G: 16 products of (outputs × tiles) by
+// (tiles × channels), summed over every tile of every image, where the implicit GEMM sums
+// 9 taps × channels columns over every pixel.
+//
+// `winograd_weight_part` gives a workgroup one ξ, one range of tiles (flattened over the
+// images) and a 64 × 64 block of (output, summed) channels, and stores its partial ∂U_ξ; the
+// ξ = (1, 1) workgroups of the first channel block also store ∂M's row sums, which are the
+// bias gradient's (that ∂M entry is the sum of the tile's four ∂Y). `winograd_weight_sum`
+// adds every range's partials in a fixed order and transforms back.
+//
+// Here `outputs` is the layer's output channels (M), `summed` its input channels (C); the
+// input is the layer's input maps (in_t), `v_out` its output's gradient, both local to the
+// pass's images.
+
+@group(0) @binding(1) var<storage, read> input: array<in_t>;
+@group(0) @binding(2) var<storage, read> v_out: array<f32>;
+// [ξ][part][m][c], then [part][m] for the bias.
+@group(0) @binding(3) var<storage, read_write> partials: array<f32>;
+@group(0) @binding(4) var<storage, read_write> v_params: array<f32>;
+
+const WG: u32 = 256u;
+// Output × summed channels per workgroup, tiles per staged slice.
+const BM: u32 = 64u;
+const BC: u32 = 64u;
+const BK: u32 = 32u;
+// ξ = (1, 1): Aᵀ's second column is (1, 1), so ∂M there sums a tile's four output gradients.
+const BIAS_XI: u32 = 5u;
+
+var<workgroup> tile_a: array<vec4<f32>, BK * BM / 4u>;
+var<workgroup> tile_b: array<vec4<f32>, BK * BC / 4u>;
+
+fn grad_at(b: u32, m: u32, y: u32, x: u32) -> f32 {
+    if y >= wn.height || x >= wn.width {
+        return 0.0;
+    }
+    return v_out[((b * wn.outputs + m) * wn.height + y) * wn.width + x];
+}
+
+// (image, tile row, tile column) of tile q of the flattened range.
+fn tile_of(q: u32) -> vec3<u32> {
+    let per_image = wn.tiles_x * wn.tiles_y;
+    let t = q % per_image;
+    return vec3<u32>(q / per_image, t / wn.tiles_x, t % wn.tiles_x);
+}
+
+fn bias_slot(part: u32, m: u32) -> u32 {
+    return 16u * wn.parts * wn.outputs * wn.summed + part * wn.outputs + m;
+}
+
+@compute @workgroup_size(WG)
+fn winograd_weight_part(
+    @builtin(workgroup_id) wg: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
+    // Grid: x the 16 positions, y the ranges of tiles, z channel blocks (output-major).
+    let xi = wg.x;
+    let part = wg.y;
+    let c_blocks = (wn.summed + BC - 1u) / BC;
+    let m0 = (wg.z / c_blocks) * BM;
+    let c0 = (wg.z % c_blocks) * BC;
+    let ri = bt_row(xi / 4u);
+    let rj = bt_row(xi % 4u);
+    let ai = at_col(xi / 4u);
+    let aj = at_col(xi % 4u);
+    let q_begin = part * wn.range;
+    let q_end = min(wn.images * wn.tiles_x * wn.tiles_y, q_begin + wn.range);
+    let with_bias = xi == BIAS_XI && c0 == 0u;
+    // Thread: output channels m0 + 4·ty + r, summed channels c0 + 4·tx …
+    let ty = lid / 16u;
+    let tx = lid % 16u;
+    var acc0 = vec4<f32>(0.0);
+    var acc1 = vec4<f32>(0.0);
+    var acc2 = vec4<f32>(0.0);
+    var acc3 = vec4<f32>(0.0);
+    var bias = vec4<f32>(0.0);
+    for (var q0 = q_begin; q0 < q_end; q0 += BK) {
+        // Neighbouring invocations take neighbouring tiles: their reads are 2 pixels apart.
+        for (var e = lid; e < BK * BM; e += WG) {
+            let kk = e % BK;
+            let mm = e / BK;
+            var va = 0.0;
+            if q0 + kk < q_end && m0 + mm < wn.outputs {
+                let t = tile_of(q0 + kk);
+                let y = 2u * t.y;
+                let x = 2u * t.z;
+                let m = m0 + mm;
+                va = ai.x * (aj.x * grad_at(t.x, m, y, x) + aj.y * grad_at(t.x, m, y, x + 1u))
+                    + ai.y * (aj.x * grad_at(t.x, m, y + 1u, x)
+                        + aj.y * grad_at(t.x, m, y + 1u, x + 1u));
+            }
+            tile_a[kk * (BM / 4u) + mm / 4u][mm % 4u] = va;
+        }
+        for (var e = lid; e < BK * BC; e += WG) {
+            let kk = e % BK;
+            let cc = e / BK;
+            var vb = 0.0;
+            if q0 + kk < q_end && c0 + cc < wn.summed {
+                let t = tile_of(q0 + kk);
+                vb = transformed_input(t.x, c0 + cc, t.yz, ri, rj);
+            }
+            tile_b[kk * (BC / 4u) + cc / 4u][cc % 4u] = vb;
+        }
+        workgroupBarrier();
+        for (var kk = 0u; kk < BK; kk++) {
+            let a = tile_a[kk * (BM / 4u) + ty];
+            let bv = tile_b[kk * (BC / 4u) + tx];
+            acc0 += a.x * bv;
+            acc1 += a.y * bv;
+            acc2 += a.z * bv;
+            acc3 += a.w * bv;
+            bias += a;
+        }
+        workgroupBarrier();
+    }
+    let slot = (xi * wn.parts + part) * wn.outputs;
+    var rows = array<vec4<f32>, 4>(acc0, acc1, acc2, acc3);
+    for (var r = 0u; r < 4u; r++) {
+        let m = m0 + 4u * ty + r;
+        if m >= wn.outputs {
+            continue;
+        }
+        for (var j = 0u; j < 4u; j++) {
+            let c = c0 + 4u * tx + j;
+            if c < wn.summed {
+                partials[(slot + m) * wn.summed + c] = rows[r][j];
+            }
+        }
+        if with_bias && tx == 0u {
+            partials[bias_slot(part, m)] = bias[r];
+        }
+    }
+}
+
+// One invocation per (output, summed) channel pair: its 16 sums over the ranges, in range
+// order, then ∂g = Gᵀ ∂U G into the layer's W[m][c][ky][kx]; the pairs of summed channel 0
+// also write the bias gradient.
+@compute @workgroup_size(64)
+fn winograd_weight_sum(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let t = gid.x;
+    if t >= wn.outputs * wn.summed {
+        return;
+    }
+    let m = t / wn.summed;
+    let c = t % wn.summed;
+    // Rows of ∂U G: row i is Σ_j ∂U[i][j]·(row j of G).
+    var h: array<vec3<f32>, 4>;
+    for (var i = 0u; i < 4u; i++) {
+        h[i] = vec3<f32>(0.0);
+        for (var j = 0u; j < 4u; j++) {
+            let xi = 4u * i + j;
+            var s = 0.0;
+            for (var part = 0u; part < wn.parts; part++) {
+                s += partials[((xi * wn.parts + part) * wn.outputs + m) * wn.summed + c];
+            }
+            h[i] += s * g_row(j);
+        }
+    }
+    for (var ky = 0u; ky < 3u; ky++) {
+        var row = vec3<f32>(0.0);
+        for (var i = 0u; i < 4u; i++) {
+            row += g_row(i)[ky] * h[i];
+        }
+        for (var kx = 0u; kx < 3u; kx++) {
+            v_params[wn.w_off + (m * wn.summed + c) * 9u + 3u * ky + kx] = row[kx];
+        }
+    }
+    if c == 0u && wn.bias_off != 0xffffffffu {
+        var s = 0.0;
+        for (var part = 0u; part < wn.parts; part++) {
+            s += partials[bias_slot(part, m)];
+        }
+        v_params[wn.bias_off + m] = s;
+    }
+}
