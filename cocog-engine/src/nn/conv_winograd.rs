@@ -230,16 +230,21 @@ impl ConvWinograd {
     ) {
         let mut u = Self::uniform(layer, size, false);
         let tiles = u.tiles_x * u.tiles_y * size.images;
-        // Ranges of whole staged slices, about TARGET_PARTS of them: enough workgroups to fill
-        // a GPU (16 positions each) and a partial buffer of at most TARGET_PARTS × 16 × M × C.
+        let pairs = u.outputs * u.summed;
+        let part_bytes = (POSITIONS * u64::from(pairs) + u64::from(u.outputs)) * 4;
+        // Ranges of whole staged slices, about TARGET_PARTS of them (enough workgroups to fill
+        // a GPU, 16 positions each), fewer where their partials would outgrow a binding.
+        let fit = u32::try_from(rec.ctx().binding_limit() / part_bytes).unwrap_or(u32::MAX);
         u.range = tiles
-            .div_ceil(TARGET_PARTS)
+            .div_ceil(TARGET_PARTS.min(fit).max(1))
             .next_multiple_of(SLICE)
             .max(SLICE);
         u.parts = tiles.div_ceil(u.range);
-        let pairs = u.outputs * u.summed;
-        let floats = (POSITIONS * u64::from(pairs) + u64::from(u.outputs)) * u64::from(u.parts);
-        let partials = ws.buffer(rec.ctx(), "winograd weight partials", floats * 4);
+        let partials = ws.buffer(
+            rec.ctx(),
+            "winograd weight partials",
+            part_bytes * u64::from(u.parts),
+        );
         let uniform = rec.uniform(&u);
         let blocks = u.outputs.div_ceil(BLOCK_M) * u.summed.div_ceil(BLOCK_M);
         self.weight_grad.part.dispatch(
