@@ -410,6 +410,13 @@ fn gpu_learned_mode_past_one_block_of_tiles_matches_the_reference() {
     gpu_case(CompositeMode::Learned, 72, 2, 19, 18, 11);
 }
 
+/// More tiles than the Winograd weight gradient's ranges take in one slice each (4232 tiles in
+/// 89 ranges of 48, 3 slices), the last range short.
+#[test]
+fn gpu_learned_mode_with_ranges_of_several_slices_matches_the_reference() {
+    gpu_case(CompositeMode::Learned, 32, 2, 92, 92, 12);
+}
+
 /// Maps large enough that the head's weight gradient splits 327,680 positions into 1024 ranges
 /// of 320 (more ranges than a summing workgroup has threads, longer than the 256 minimum).
 #[test]

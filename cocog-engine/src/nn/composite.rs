@@ -183,7 +183,8 @@ impl Compositor {
             precision,
             gemm: ConvGemm::new(ctx, config.channels, precision, path == ConvPath::Coop),
             tile: (path == ConvPath::Tiled).then(|| ConvTile::new(ctx, precision)),
-            winograd: (path == ConvPath::Winograd).then(|| ConvWinograd::new(ctx, precision)),
+            winograd: (path == ConvPath::Winograd && ConvWinograd::fits(ctx, config.channels))
+                .then(|| ConvWinograd::new(ctx, precision)),
             conv: Kernel::new(ctx, &conv, "conv_forward"),
             conv_weight_parts: Kernel::new(ctx, &conv, "conv_weight_grad_part"),
             conv_weight_sum: Kernel::new(ctx, &conv, "conv_weight_grad_sum"),

@@ -12,7 +12,7 @@ const BLOCK_TILES: u32 = 8;
 const BLOCK_M: u32 = 64;
 /// Tiles per staged slice of the weight gradient (conv_winograd_grad.wgsl's BK), and about how
 /// many ranges it sums apart.
-const SLICE: u32 = 32;
+const SLICE: u32 = 16;
 const TARGET_PARTS: u32 = 128;
 /// Positions of a transformed 4×4 tile.
 const POSITIONS: u64 = 16;
@@ -150,6 +150,13 @@ pub struct ConvWinograd {
 impl ConvWinograd {
     /// Channels a pass should sum at least: one staged slice (conv_winograd.wgsl's BK).
     pub const MIN_SUMMED: u32 = 32;
+
+    /// Whether a layer of `channels` in and out fits: its transformed weights, and the
+    /// partials of one range of the weight gradient, each in one binding.
+    pub fn fits(ctx: &GpuContext, channels: u32) -> bool {
+        let pairs = u64::from(channels).pow(2);
+        (POSITIONS * pairs + u64::from(channels)) * 4 <= ctx.binding_limit()
+    }
 
     pub fn new(ctx: &GpuContext, precision: MapPrecision) -> Self {
         Self {

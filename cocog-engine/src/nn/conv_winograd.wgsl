@@ -33,8 +33,12 @@ fn kernel_tap(m: u32, c: u32, k: u32) -> f32 {
 }
 
 @compute @workgroup_size(64)
-fn winograd_weights(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let t = gid.x;
+fn winograd_weights(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+) {
+    // dispatch_1d folds a long grid into y.
+    let t = gid.y * nwg.x * 64u + gid.x;
     if t >= wn.outputs * wn.summed {
         return;
     }

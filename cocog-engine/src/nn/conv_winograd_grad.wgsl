@@ -25,12 +25,17 @@ const WG: u32 = 256u;
 // Output × summed channels per workgroup, tiles per staged slice.
 const BM: u32 = 64u;
 const BC: u32 = 64u;
-const BK: u32 = 32u;
+const BK: u32 = 16u;
+// Staged rows' stride in vec4s: one more than a row holds, because neighbouring invocations
+// stage neighbouring tiles (rows): unpadded, their stores would all hit one bank of workgroup
+// memory; padded they spread over the banks.
+const ROW_A: u32 = BM / 4u + 1u;
+const ROW_B: u32 = BC / 4u + 1u;
 // ξ = (1, 1): Aᵀ's second column is (1, 1), so ∂M there sums a tile's four output gradients.
 const BIAS_XI: u32 = 5u;
 
-var<workgroup> tile_a: array<vec4<f32>, BK * BM / 4u>;
-var<workgroup> tile_b: array<vec4<f32>, BK * BC / 4u>;
+var<workgroup> tile_a: array<vec4<f32>, BK * ROW_A>;
+var<workgroup> tile_b: array<vec4<f32>, BK * ROW_B>;
 
 fn grad_at(b: u32, m: u32, y: u32, x: u32) -> f32 {
     if y >= wn.height || x >= wn.width {
@@ -91,7 +96,7 @@ fn winograd_weight_part(
                     + ai.y * (aj.x * grad_at(t.x, m, y + 1u, x)
                         + aj.y * grad_at(t.x, m, y + 1u, x + 1u));
             }
-            tile_a[kk * (BM / 4u) + mm / 4u][mm % 4u] = va;
+            tile_a[kk * ROW_A + mm / 4u][mm % 4u] = va;
         }
         for (var e = lid; e < BK * BC; e += WG) {
             let kk = e % BK;
@@ -101,12 +106,12 @@ fn winograd_weight_part(
                 let t = tile_of(q0 + kk);
                 vb = transformed_input(t.x, c0 + cc, t.yz, ri, rj);
             }
-            tile_b[kk * (BC / 4u) + cc / 4u][cc % 4u] = vb;
+            tile_b[kk * ROW_B + cc / 4u][cc % 4u] = vb;
         }
         workgroupBarrier();
         for (var kk = 0u; kk < BK; kk++) {
-            let a = tile_a[kk * (BM / 4u) + ty];
-            let bv = tile_b[kk * (BC / 4u) + tx];
+            let a = tile_a[kk * ROW_A + ty];
+            let bv = tile_b[kk * ROW_B + tx];
             acc0 += a.x * bv;
             acc1 += a.y * bv;
             acc2 += a.z * bv;
@@ -138,8 +143,12 @@ fn winograd_weight_part(
 // order, then ∂g = Gᵀ ∂U G into the layer's W[m][c][ky][kx]; the pairs of summed channel 0
 // also write the bias gradient.
 @compute @workgroup_size(64)
-fn winograd_weight_sum(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let t = gid.x;
+fn winograd_weight_sum(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+) {
+    // dispatch_1d folds a long grid into y.
+    let t = gid.y * nwg.x * 64u + gid.x;
     if t >= wn.outputs * wn.summed {
         return;
     }
