@@ -111,9 +111,11 @@ fn winograd_conv(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation
     for (var q = 0u; q < 16u; q++) {
         y[q] = vec4<f32>(0.0);
     }
+    // The tile this invocation stages in every slice (WG is a multiple of BN).
+    let n_staged = lid % BN;
+    let tile_staged = vec2<u32>(t0.x + n_staged / BT, t0.y + n_staged % BT);
     for (var xi = 0u; xi < 16u; xi++) {
-        let ri = bt_row(xi / 4u);
-        let rj = bt_row(xi % 4u);
+        let taps = taps_of(tile_staged, bt_row(xi / 4u), bt_row(xi % 4u));
         var acc0 = vec4<f32>(0.0);
         var acc1 = vec4<f32>(0.0);
         var acc2 = vec4<f32>(0.0);
@@ -129,14 +131,12 @@ fn winograd_conv(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation
                 tile_a[kk * (BM / 4u) + mm / 4u][mm % 4u] = va;
             }
             for (var e = lid; e < BK * BN; e += WG) {
-                let n = e % BN;
                 let kk = e / BN;
                 var vb = 0.0;
                 if c0 + kk < wn.summed {
-                    let tile = vec2<u32>(t0.x + n / BT, t0.y + n % BT);
-                    vb = transformed_input(b, c0 + kk, tile, ri, rj);
+                    vb = transformed_input(b, c0 + kk, taps);
                 }
-                tile_b[kk * (BN / 4u) + n / 4u][n % 4u] = vb;
+                tile_b[kk * (BN / 4u) + n_staged / 4u][n_staged % 4u] = vb;
             }
             workgroupBarrier();
             for (var kk = 0u; kk < BK; kk++) {

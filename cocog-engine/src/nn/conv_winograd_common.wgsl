@@ -62,24 +62,33 @@ fn at_col(i: u32) -> vec2<f32> {
     }
 }
 
-fn input_at(b: u32, c: u32, y: i32, x: i32) -> f32 {
-    if y < 0 || x < 0 || y >= i32(wn.height) || x >= i32(wn.width) {
-        return 0.0;
-    }
-    let plane = (b + wn.image0) * wn.summed + c;
-    return f32(input[(plane * wn.height + u32(y)) * wn.width + u32(x)]);
+// The 4 patch values entry ξ = (i, j) of Bᵀ d B sums for one tile, as offsets in a channel's
+// plane and their signs (ri = bt_row(i), rj = bt_row(j)); a value outside the map (zero
+// padding) has sign 0 and offset 0. Found once per tile and ξ, it serves every channel.
+struct Taps {
+    offsets: vec4<u32>,
+    signs: vec4<f32>,
 }
 
-
-// Entry ξ = (i, j) of Bᵀ d B for channel c of the tile at (row, column) `tile` of image b, where
-// ri = bt_row(i), rj = bt_row(j) and d is the tile's 4×4 input patch (zero outside the map).
-fn transformed_input(b: u32, c: u32, tile: vec2<u32>, ri: vec4<i32>, rj: vec4<i32>) -> f32 {
+fn taps_of(tile: vec2<u32>, ri: vec4<i32>, rj: vec4<i32>) -> Taps {
     // The patch's top-left corner: the tile's first output moved by −pad.
-    let py = i32(2u * tile.x) - 1;
-    let px = i32(2u * tile.y) - 1;
-    let top = f32(rj.y) * input_at(b, c, py + ri.x, px + rj.x)
-        + f32(rj.w) * input_at(b, c, py + ri.x, px + rj.z);
-    let bottom = f32(rj.y) * input_at(b, c, py + ri.z, px + rj.x)
-        + f32(rj.w) * input_at(b, c, py + ri.z, px + rj.z);
-    return f32(ri.y) * top + f32(ri.w) * bottom;
+    let rows = vec2<i32>(i32(2u * tile.x) - 1) + vec2<i32>(ri.x, ri.z);
+    let cols = vec2<i32>(i32(2u * tile.y) - 1) + vec2<i32>(rj.x, rj.z);
+    let row_in = rows >= vec2<i32>(0) & rows < vec2<i32>(i32(wn.height));
+    let col_in = cols >= vec2<i32>(0) & cols < vec2<i32>(i32(wn.width));
+    let inside = vec4<bool>(row_in.x & col_in.x, row_in.x & col_in.y, row_in.y & col_in.x,
+        row_in.y & col_in.y);
+    let w = i32(wn.width);
+    let at = vec4<i32>(rows.x * w + cols.x, rows.x * w + cols.y, rows.y * w + cols.x,
+        rows.y * w + cols.y);
+    let signs = vec4<f32>(f32(ri.y * rj.y), f32(ri.y * rj.w), f32(ri.w * rj.y), f32(ri.w * rj.w));
+    return Taps(select(vec4<u32>(0u), vec4<u32>(at), inside), select(vec4<f32>(0.0), signs, inside));
+}
+
+// Entry ξ of Bᵀ d B for channel c of image b, for the tile and ξ of `taps`.
+fn transformed_input(b: u32, c: u32, taps: Taps) -> f32 {
+    let base = ((b + wn.image0) * wn.summed + c) * wn.height * wn.width;
+    let d = vec4<f32>(f32(input[base + taps.offsets.x]), f32(input[base + taps.offsets.y]),
+        f32(input[base + taps.offsets.z]), f32(input[base + taps.offsets.w]));
+    return dot(taps.signs, d);
 }

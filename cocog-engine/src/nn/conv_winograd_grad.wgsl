@@ -37,11 +37,18 @@ const BIAS_XI: u32 = 5u;
 var<workgroup> tile_a: array<vec4<f32>, BK * ROW_A>;
 var<workgroup> tile_b: array<vec4<f32>, BK * ROW_B>;
 
-fn grad_at(b: u32, m: u32, y: u32, x: u32) -> f32 {
-    if y >= wn.height || x >= wn.width {
-        return 0.0;
-    }
-    return v_out[((b * wn.outputs + m) * wn.height + y) * wn.width + x];
+// The 4 output pixels entry ξ = (i, j) of A ∂Y Aᵀ sums for one tile (ai = at_col(i),
+// aj = at_col(j)), as Taps: pixels past the map's edge get sign 0.
+fn output_taps(tile: vec2<u32>, ai: vec2<f32>, aj: vec2<f32>) -> Taps {
+    let y = 2u * tile.x;
+    let x = 2u * tile.y;
+    let right = x + 1u < wn.width;
+    let below = y + 1u < wn.height;
+    let inside = vec4<bool>(true, right, below, right & below);
+    let at = vec4<u32>(y * wn.width + x, y * wn.width + x + 1u, (y + 1u) * wn.width + x,
+        (y + 1u) * wn.width + x + 1u);
+    let signs = vec4<f32>(ai.x * aj.x, ai.x * aj.y, ai.y * aj.x, ai.y * aj.y);
+    return Taps(select(vec4<u32>(0u), at, inside), select(vec4<f32>(0.0), signs, inside));
 }
 
 // (image, tile row, tile column) of tile q of the flattened range.
@@ -81,37 +88,39 @@ fn winograd_weight_part(
     var acc2 = vec4<f32>(0.0);
     var acc3 = vec4<f32>(0.0);
     var bias = vec4<f32>(0.0);
+    // The tile this invocation stages in every slice is its kk (WG is a multiple of BK).
+    let kk = lid % BK;
+    let plane = wn.height * wn.width;
     for (var q0 = q_begin; q0 < q_end; q0 += BK) {
+        let staged = q0 + kk < q_end;
+        let t = tile_of(min(q0 + kk, q_end - 1u));
+        let grad_taps = output_taps(t.yz, ai, aj);
+        let taps = taps_of(t.yz, ri, rj);
         // Neighbouring invocations take neighbouring tiles: their reads are 2 pixels apart.
         for (var e = lid; e < BK * BM; e += WG) {
-            let kk = e % BK;
             let mm = e / BK;
             var va = 0.0;
-            if q0 + kk < q_end && m0 + mm < wn.outputs {
-                let t = tile_of(q0 + kk);
-                let y = 2u * t.y;
-                let x = 2u * t.z;
-                let m = m0 + mm;
-                va = ai.x * (aj.x * grad_at(t.x, m, y, x) + aj.y * grad_at(t.x, m, y, x + 1u))
-                    + ai.y * (aj.x * grad_at(t.x, m, y + 1u, x)
-                        + aj.y * grad_at(t.x, m, y + 1u, x + 1u));
+            if staged && m0 + mm < wn.outputs {
+                let base = (t.x * wn.outputs + m0 + mm) * plane;
+                let o = grad_taps.offsets;
+                let g = vec4<f32>(v_out[base + o.x], v_out[base + o.y], v_out[base + o.z],
+                    v_out[base + o.w]);
+                va = dot(grad_taps.signs, g);
             }
             tile_a[kk * ROW_A + mm / 4u][mm % 4u] = va;
         }
         for (var e = lid; e < BK * BC; e += WG) {
-            let kk = e % BK;
             let cc = e / BK;
             var vb = 0.0;
-            if q0 + kk < q_end && c0 + cc < wn.summed {
-                let t = tile_of(q0 + kk);
-                vb = transformed_input(t.x, c0 + cc, t.yz, ri, rj);
+            if staged && c0 + cc < wn.summed {
+                vb = transformed_input(t.x, c0 + cc, taps);
             }
             tile_b[kk * ROW_B + cc / 4u][cc % 4u] = vb;
         }
         workgroupBarrier();
-        for (var kk = 0u; kk < BK; kk++) {
-            let a = tile_a[kk * ROW_A + ty];
-            let bv = tile_b[kk * ROW_B + tx];
+        for (var k = 0u; k < BK; k++) {
+            let a = tile_a[k * ROW_A + ty];
+            let bv = tile_b[k * ROW_B + tx];
             acc0 += a.x * bv;
             acc1 += a.y * bv;
             acc2 += a.z * bv;
