@@ -203,6 +203,14 @@ impl CoopBlock {
         }
     }
 
+    /// The name `NAMED` gives this layout, if any.
+    pub fn name(self) -> Option<&'static str> {
+        Self::NAMED
+            .iter()
+            .find(|(_, b)| *b == self)
+            .map(|(n, _)| *n)
+    }
+
     pub fn named(name: &str) -> Option<Self> {
         Self::NAMED
             .iter()
@@ -324,8 +332,16 @@ impl Gemm {
         layout: GemmLayout,
         scales: OperandScales,
     ) -> Option<Self> {
+        let block = Self::cooperative_block(ctx)?;
+        Self::cooperative_with(ctx, label, problem, layout, scales, block)
+    }
+
+    /// The layout `cooperative` lays its blocks out in on this context (None without cooperative
+    /// matrices): `COCOG_COOP_BLOCK`'s, or `CoopBlock::SQUARE` where that is unknown or does
+    /// not fit (said on stderr).
+    pub fn cooperative_block(ctx: &GpuContext) -> Option<CoopBlock> {
         let fragments = ctx.cooperative?;
-        let block = match CoopBlock::from_env() {
+        Some(match CoopBlock::from_env() {
             Ok(b) if Self::fits(ctx, b, fragments) => b,
             Ok(b) => {
                 eprintln!(
@@ -340,8 +356,7 @@ impl Gemm {
                 eprintln!("{e}; using {:?}", CoopBlock::SQUARE);
                 CoopBlock::SQUARE
             }
-        };
-        Self::cooperative_with(ctx, label, problem, layout, scales, block)
+        })
     }
 
     /// Whether `block` on `fragments` fits the device's workgroup limits.
@@ -493,6 +508,19 @@ impl Gemm {
                 self.tile.dispatch(rec, &all, grid);
                 reduce.dispatch_1d(rec, &all, (shape.m * shape.n).div_ceil(256));
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::CoopBlock;
+
+    /// `cocog bench` names the layout it ran by `CoopBlock::name`: no two names may share one.
+    #[test]
+    fn every_named_layout_is_named_back() {
+        for (name, block) in CoopBlock::NAMED {
+            assert_eq!(block.name(), Some(name), "{block:?}");
         }
     }
 }

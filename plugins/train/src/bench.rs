@@ -73,6 +73,9 @@ pub struct BenchReport {
     pub cooperative_matrices: String,
     /// Cooperative matrices enabled (`COCOG_COOPERATIVE_MATRIX=1` where offered).
     pub cooperative_f16: bool,
+    /// The block layout F's products take on them: `COCOG_COOP_BLOCK`'s where it fits the
+    /// adapter, else the default one.
+    pub coop_block: Option<String>,
     pub width: u32,
     pub height: u32,
     pub views: usize,
@@ -426,6 +429,8 @@ fn measure(
         shader_f16: gpu.shader_f16,
         cooperative_matrices: gpu.cooperative_matrix_shapes(),
         cooperative_f16: gpu.cooperative.is_some(),
+        coop_block: cocog_engine::Gemm::cooperative_block(gpu)
+            .map(|b| b.name().unwrap_or("unnamed").to_owned()),
         width,
         height,
         views: views.len(),
@@ -459,13 +464,6 @@ fn tempfile_dir(scene_dir: &Path) -> Result<tempfile::TempDir, StageError> {
 }
 
 /// The tensor-core block layout F's products use (`COCOG_COOP_BLOCK`, else the default).
-fn coop_block_name() -> String {
-    std::env::var("COCOG_COOP_BLOCK")
-        .ok()
-        .filter(|n| cocog_engine::CoopBlock::named(n).is_some())
-        .unwrap_or_else(|| cocog_engine::CoopBlock::NAMED[0].0.to_owned())
-}
-
 impl BenchReport {
     /// A few aligned lines for a terminal.
     pub fn table(&self) -> String {
@@ -481,7 +479,7 @@ impl BenchReport {
                 }
                 cocog_engine::nn::ConvPath::Coop if self.cooperative_f16 => &format!(
                     "implicit GEMMs on tensor cores (COCOG_F_CONV=coop, block {})",
-                    coop_block_name()
+                    self.coop_block.as_deref().unwrap_or("none")
                 ),
                 cocog_engine::nn::ConvPath::Coop => {
                     "implicit GEMMs (COCOG_F_CONV=coop asked, no cooperative matrices enabled)"
