@@ -107,10 +107,7 @@ fn winograd_conv(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation
     let ty = lid / 16u;
     let tx = lid % 16u;
     // y[4·r + t]: the 2×2 outputs (row-major) of channel r and tile t.
-    var y: array<vec4<f32>, 16>;
-    for (var q = 0u; q < 16u; q++) {
-        y[q] = vec4<f32>(0.0);
-    }
+    var y = array<vec4<f32>, 16>();
     // The tile this invocation stages in every slice (WG is a multiple of BN).
     let n_staged = lid % BN;
     let tile_staged = vec2<u32>(t0.x + n_staged / BT, t0.y + n_staged % BT);
@@ -153,18 +150,46 @@ fn winograd_conv(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation
         let ai = at_col(xi / 4u);
         let aj = at_col(xi % 4u);
         let k = vec4<f32>(ai.x * aj.x, ai.x * aj.y, ai.y * aj.x, ai.y * aj.y);
-        for (var t = 0u; t < 4u; t++) {
-            y[t] += k * acc0[t];
-            y[4u + t] += k * acc1[t];
-            y[8u + t] += k * acc2[t];
-            y[12u + t] += k * acc3[t];
-        }
+        // Constant indices only, here and below: an array indexed by a variable may be kept in
+        // memory instead of registers.
+        y[0] += k * acc0.x;
+        y[1] += k * acc0.y;
+        y[2] += k * acc0.z;
+        y[3] += k * acc0.w;
+        y[4] += k * acc1.x;
+        y[5] += k * acc1.y;
+        y[6] += k * acc1.z;
+        y[7] += k * acc1.w;
+        y[8] += k * acc2.x;
+        y[9] += k * acc2.y;
+        y[10] += k * acc2.z;
+        y[11] += k * acc2.w;
+        y[12] += k * acc3.x;
+        y[13] += k * acc3.y;
+        y[14] += k * acc3.z;
+        y[15] += k * acc3.w;
     }
-    for (var r = 0u; r < 4u; r++) {
-        for (var t = 0u; t < 4u; t++) {
-            let n = 4u * tx + t;
-            let tile = vec2<u32>(t0.x + n / BT, t0.y + n % BT);
-            store_tile(b, m0 + 4u * ty + r, tile, y[4u * r + t]);
-        }
-    }
+    // The thread's 4 tiles lie along one row of the block.
+    let n = 4u * tx;
+    let tile0 = vec2<u32>(t0.x + n / BT, t0.y + n % BT);
+    let tile1 = tile0 + vec2<u32>(0u, 1u);
+    let tile2 = tile0 + vec2<u32>(0u, 2u);
+    let tile3 = tile0 + vec2<u32>(0u, 3u);
+    let m = m0 + 4u * ty;
+    store_tile(b, m + 0u, tile0, y[0]);
+    store_tile(b, m + 0u, tile1, y[1]);
+    store_tile(b, m + 0u, tile2, y[2]);
+    store_tile(b, m + 0u, tile3, y[3]);
+    store_tile(b, m + 1u, tile0, y[4]);
+    store_tile(b, m + 1u, tile1, y[5]);
+    store_tile(b, m + 1u, tile2, y[6]);
+    store_tile(b, m + 1u, tile3, y[7]);
+    store_tile(b, m + 2u, tile0, y[8]);
+    store_tile(b, m + 2u, tile1, y[9]);
+    store_tile(b, m + 2u, tile2, y[10]);
+    store_tile(b, m + 2u, tile3, y[11]);
+    store_tile(b, m + 3u, tile0, y[12]);
+    store_tile(b, m + 3u, tile1, y[13]);
+    store_tile(b, m + 3u, tile2, y[14]);
+    store_tile(b, m + 3u, tile3, y[15]);
 }
