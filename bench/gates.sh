@@ -11,6 +11,8 @@
 #   9-full     the same at full size, 30000 iterations (#9)
 #   12-small   3dgs and cocog on dev-table and dev-shelf, --downscale 4, 7000 iterations (#12)
 #   12-full    the same at full size, 30000 iterations (#12)
+#   12-full-table, 12-full-shelf  12-full's two runs of one scene: a lease too short for both
+#              scenes runs one, and a later lease the other
 #   12-variants cocog's lens and code variants (--coc-variant) on both dev scenes, --downscale 4,
 #              7000 iterations (#12 asks for both; 12-small trains the default)
 # On lavapipe (128 MiB bindings) 12-full's cocog runs fit (F takes its renders in chunks); a
@@ -39,7 +41,7 @@
 set -euo pipefail
 
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-usage() { sed -n '2,37p' "${BASH_SOURCE[0]}" >&2; exit 2; }
+usage() { sed -n '2,40p' "${BASH_SOURCE[0]}" >&2; exit 2; }
 
 out="" sets=() scenes="$root/../shared/bench" iterations="" train_args=() jobs=1 deadline=""
 while [[ $# -gt 0 ]]; do
@@ -70,6 +72,8 @@ for set in "${sets[@]}"; do
         9-full) runs+=("sharp-dev 3dgs 1 30000" "dev-table 3dgs 1 30000") ;;
         12-small) for s in dev-table dev-shelf; do runs+=("$s 3dgs 4 7000" "$s cocog 4 7000 paper"); done ;;
         12-full) for s in dev-table dev-shelf; do runs+=("$s 3dgs 1 30000" "$s cocog 1 30000 paper"); done ;;
+        12-full-table | 12-full-shelf) s=dev-${set#12-full-}
+            runs+=("$s 3dgs 1 30000" "$s cocog 1 30000 paper") ;;
         12-variants) for s in dev-table dev-shelf; do
             runs+=("$s cocog 4 7000 lens" "$s cocog 4 7000 code"); done ;;
         *) echo "gates.sh: unknown set $set" >&2; usage ;;

@@ -58,7 +58,8 @@
 # #12's full-size gate with F on tensor cores, once the step phase has shown them fast (an
 # estimate, not a measurement: about 14 ms a cocog step at 400×300 if F reaches 50 TFLOP/s):
 #   COCOG_F_CONV=coop COCOG_COOPERATIVE_MATRIX=1 BUDGET=540 bench/gpu-session.sh RESULTS gates 12-full
-# or by Winograd (COCOG_F_CONV=winograd) where the step phase's 400×300 rows show that faster.
+# or by Winograd (COCOG_F_CONV=winograd) where the step phase's 400×300 rows show that faster;
+# where both scenes do not fit a lease, `gates 12-full-table`, and `gates 12-full-shelf` on another.
 # (the four trainings share the GPU; stopped ones continue on the next call with the same line).
 # gsplat's CUDA code builds on its first call on a machine (60–80 s on 16 cores); later calls on
 # the same warm machine reuse it. A phase that finished leaves a marker in WORK, so a second call
