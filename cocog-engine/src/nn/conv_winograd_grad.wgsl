@@ -125,7 +125,12 @@ fn winograd_weight_part(
             acc1 += a.y * bv;
             acc2 += a.z * bv;
             acc3 += a.w * bv;
-            bias += a;
+        }
+        // Only the bias's workgroups sum ∂M's rows: kept out of every other product's loop.
+        if with_bias {
+            for (var k = 0u; k < BK; k++) {
+                bias += tile_a[k * ROW_A + ty];
+            }
         }
         workgroupBarrier();
     }
