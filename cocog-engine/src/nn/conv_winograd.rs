@@ -14,6 +14,8 @@ const BLOCK_M: u32 = 64;
 /// many ranges it sums apart.
 const SLICE: u32 = 16;
 const TARGET_PARTS: u32 = 128;
+/// Channel pairs per workgroup of the sum (conv_winograd_grad.wgsl's SUM_PAIRS).
+const SUM_PAIRS: u32 = 16;
 /// Positions of a transformed 4×4 tile.
 const POSITIONS: u64 = 16;
 
@@ -262,7 +264,7 @@ impl ConvWinograd {
         self.weight_grad.sum.dispatch_1d(
             rec,
             &[(0, &uniform), (3, &partials), (4, v_params)],
-            pairs.div_ceil(64),
+            pairs.div_ceil(SUM_PAIRS),
         );
     }
 }

@@ -9,9 +9,11 @@ use crate::core::{Bind, CoopFragments, GpuContext, Kernel, Recorder, Workspace, 
 /// Workgroups along x before the tile grid folds into y.
 const MAX_GRID_X: u32 = 65_535;
 /// K per split is at least this, so each workgroup amortises its tile loads; splits are added
-/// until the grid has about `TARGET_GROUPS` workgroups.
+/// until the grid has about `TARGET_INVOCATIONS`. Counted in invocations, not workgroups: a
+/// 64 × 16 weight-gradient tile has 64 of them, and 256 such workgroups filled 6 % of an
+/// H200's (F's 5×5 weight gradient ran at 1.4 TFLOP/s there).
 const MIN_K_SPLIT: u32 = 256;
-const TARGET_GROUPS: u32 = 256;
+const TARGET_INVOCATIONS: u32 = 1 << 17;
 
 /// The block of C one workgroup computes: its threads as rows × columns, each computing 4×4
 /// values of C. Small problems (a weight gradient of 16 × 76) want small tiles, long ones
@@ -455,6 +457,14 @@ impl Gemm {
         }
     }
 
+    /// Invocations of one workgroup.
+    fn invocations(&self) -> u32 {
+        match self.cooperative {
+            Some((f, block)) => block.footprint(f).0,
+            None => self.layout.tile.thread_rows * self.layout.tile.thread_cols,
+        }
+    }
+
     /// Parts of K per batch: enough workgroups to fill the device, at least `MIN_K_SPLIT` of
     /// K each.
     fn parts(&self, shape: &GemmShape, tiles: u32) -> u32 {
@@ -462,7 +472,8 @@ impl Gemm {
             return 1;
         }
         let by_work = shape.k.div_ceil(MIN_K_SPLIT).max(1);
-        let by_grid = TARGET_GROUPS.div_ceil(tiles * shape.batches.max(1)).max(1);
+        let groups = TARGET_INVOCATIONS.div_ceil(self.invocations());
+        let by_grid = groups.div_ceil(tiles * shape.batches.max(1)).max(1);
         by_work
             .min(by_grid)
             .min(65_535 / shape.batches.max(1))
