@@ -181,7 +181,8 @@ phase_step() {
 
 # The cocog step at 400×300 on model $1 with F as each of $2...: gemm:4x4 (the f32 products),
 # winograd:4x4 (its 3×3 layers by Winograd) or coop:LAYOUT (tensor cores in that CoopBlock
-# layout).
+# layout), with the per-kernel split; by $COCOG_FULL_SIZE where set (another build, for an A/B
+# on one machine).
 cocog_full_size() {
     local model=$1 m
     shift
@@ -189,8 +190,8 @@ cocog_full_size() {
         echo "-- cocog step at 400×300 on the model's Gaussians, COCOG_F_CONV=${m%%:*}$([[ $m == coop* ]] && echo " block ${m#*:}")" >>"$log"
         bounded 60 "${clean_env[@]}" COCOG_F_CONV=${m%%:*} COCOG_COOP_BLOCK=${m#*:} \
             COCOG_COOPERATIVE_MATRIX=$([[ $m == coop* ]] && echo 1 || echo 0) \
-            "$cocog" bench "$work/in-dev-table" --downscale 1 --resume "$model" --method cocog \
-            --iterations 30 --warmup 5 >>"$log" 2>&1
+            "${COCOG_FULL_SIZE:-$cocog}" bench "$work/in-dev-table" --downscale 1 --resume "$model" \
+            --method cocog --iterations 30 --warmup 5 --kernels >>"$log" 2>&1
     done
 }
 
