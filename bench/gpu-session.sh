@@ -23,13 +23,13 @@
 #   step            #12's step ratio: a 5000-iteration 3dgs run on dev-table at 100×75 gives the
 #                   Gaussians, then `cocog bench --resume` times a 3dgs step and a cocog step
 #                   (the default variant, F on) on them, the latter with F's convolutions as
-#                   implicit GEMMs, as tiled kernels (COCOG_F_CONV=tiled) and with its 3×3
-#                   layers by Winograd (COCOG_F_CONV=winograd), and with F's maps
+#                   implicit GEMMs (COCOG_F_CONV=gemm), as tiled kernels (COCOG_F_CONV=tiled)
+#                   and with its 3×3 layers by Winograd (the default), and with F's maps
 #                   in f32 (COCOG_NO_F16=1) as well as f16, with the per-kernel split
 #                   (--kernels), and on tensor cores (COCOG_F_CONV=coop, f16 operands,
 #                   experimental), and both steps compositing in 8×8 blocks
-#                   (COCOG_RASTER_BLOCK=8) or with the backward's tile lists split
-#                   (COCOG_RASTER_SPLIT=auto); then at 400×300 on the same Gaussians the 3dgs
+#                   (COCOG_RASTER_BLOCK=8) or with the backward's tile lists whole
+#                   (COCOG_RASTER_SPLIT=1; a GPU's default splits them); then at 400×300 on the same Gaussians the 3dgs
 #                   step (each of those settings, and 4 chunks) and the cocog step (what a step
 #                   of #12's full-size gate costs), F on the f32 products, by Winograd and on
 #                   tensor cores in the default block layout  ~105 s on an H200 (an estimate)
@@ -152,17 +152,17 @@ phase_step() {
     local model
     model=$(step_model) || return 1
     local m vars
-    for m in 3dgs cocog cocog-tiled cocog-winograd cocog-f32 cocog-coop 3dgs-b8 cocog-b8 3dgs-split cocog-split; do
+    for m in 3dgs cocog cocog-tiled cocog-winograd cocog-f32 cocog-coop 3dgs-b8 cocog-b8 3dgs-whole cocog-whole; do
         echo "-- $m step on the model's Gaussians" >>"$log"
-        vars=(COCOG_F_CONV=gemm)
+        vars=(COCOG_F_CONV=gemm)  # the rows named cocog-winograd time the default
         [[ $m == *-tiled ]] && vars=(COCOG_F_CONV=tiled)
         [[ $m == *-winograd ]] && vars=(COCOG_F_CONV=winograd)
         [[ $m == *-coop ]] && vars=(COCOG_F_CONV=coop COCOG_COOPERATIVE_MATRIX=1)
         [[ $m == *-f32 ]] && vars+=(COCOG_NO_F16=1)
         # Compositing in 8×8 blocks of a tile (four times the workgroups on a 100×75 frame).
         [[ $m == *-b8 ]] && vars+=(COCOG_RASTER_BLOCK=8)
-        # The compositing backward walking each tile's list in chunks (RasterSplit::Auto).
-        [[ $m == *-split ]] && vars+=(COCOG_RASTER_SPLIT=auto)
+        # The compositing backward walking each tile's list whole (a GPU's default splits them).
+        [[ $m == *-whole ]] && vars+=(COCOG_RASTER_SPLIT=1)
         bounded 60 "${clean_env[@]}" "${vars[@]}" "$cocog" bench "$work/in-dev-table" --downscale 4 \
             --resume "$model" --method "${m%%-*}" --iterations 100 --warmup 10 --kernels \
             >>"$log" 2>&1
@@ -222,9 +222,9 @@ phase_peer_synthetic() {
         --out "$results/gsplat-synthetic.json" --iterations 20 --warmup 5 >>"$log" 2>&1
 }
 
-# The compositing settings the benches compare: 16×16 tiles, 8×8 blocks, and tile lists split
-# for the backward (as many chunks as RasterSplit::Auto picks, and 4).
-raster_settings=("COCOG_RASTER_BLOCK=16" "COCOG_RASTER_BLOCK=8" "COCOG_RASTER_SPLIT=auto"
+# The compositing settings the benches compare: whole tile lists in the backward, 8×8 blocks,
+# and tile lists split (as many chunks as RasterSplit::Auto picks, a GPU's default, and 4).
+raster_settings=("COCOG_RASTER_SPLIT=1" "COCOG_RASTER_BLOCK=8" "COCOG_RASTER_SPLIT=auto"
     "COCOG_RASTER_SPLIT=4")
 
 # cocog's side of peer-train: sharp-dev at 400×300, 30000 iterations of 3dgs, timed, then scored.
@@ -252,9 +252,9 @@ phase_peer_train() {
     done
 }
 
-# peer-train's cocog run again with the backward's tile lists split (COCOG_RASTER_SPLIT, auto
-# unless set), for #11's figure once peer-train's benches show the split faster; gsplat's side
-# is peer-train's.
+# peer-train's cocog run again with the backward's tile lists split as COCOG_RASTER_SPLIT says
+# (auto unless set, which is a GPU's default now: set 1 to time whole lists); gsplat's side is
+# peer-train's.
 phase_train_split() {
     COCOG_RASTER_SPLIT="${COCOG_RASTER_SPLIT:-auto}" train_sharp_dev "$work/split-sharp-dev"
 }

@@ -12,6 +12,6 @@ pub use batch::{
 pub use frame::Frame;
 pub use renderer::{
     MAX_SPLIT, QUAT_TO_ROT_WGSL, RasterSplit, Renderer, SPLIT_TARGET, raster_block_from_env,
-    raster_split_from_env,
+    raster_split_for,
 };
 pub use state::{ForwardState, Gradients, RenderedImage};

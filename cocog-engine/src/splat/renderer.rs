@@ -113,11 +113,19 @@ pub const SPLIT_TARGET: u32 = 2048;
 /// Most chunks per tile list.
 pub const MAX_SPLIT: u32 = 16;
 
-/// `COCOG_RASTER_SPLIT=N` (1 to `MAX_SPLIT`) or `auto` splits the compositing backward's tile
-/// lists (experimental, untimed on a GPU); unset or anything else leaves them whole.
-pub fn raster_split_from_env() -> RasterSplit {
+/// How the compositing backward walks its tile lists on `ctx`'s adapter: `COCOG_RASTER_SPLIT=N`
+/// (1 to `MAX_SPLIT`) or `auto` where set, else `Auto` on a GPU and whole lists on a CPU
+/// adapter. On an H200 the split took the 3dgs step at 100×75 from 4.6 to 1.7 ms and at
+/// 400×300 from 1.5 to 1.3 ms (a short frame's few tiles leave most of a GPU idle while each
+/// workgroup walks a whole list); on lavapipe's two cores it cost 5–10 %.
+pub fn raster_split_for(ctx: &GpuContext) -> RasterSplit {
+    let default = if ctx.adapter_info.device_type == wgpu::DeviceType::Cpu {
+        RasterSplit::Fixed(1)
+    } else {
+        RasterSplit::Auto
+    };
     let Ok(value) = std::env::var("COCOG_RASTER_SPLIT") else {
-        return RasterSplit::Fixed(1);
+        return default;
     };
     if value == "auto" {
         return RasterSplit::Auto;
@@ -127,9 +135,9 @@ pub fn raster_split_from_env() -> RasterSplit {
         // Said on stderr, as the other experimental switches do, rather than refused.
         _ => {
             eprintln!(
-                "COCOG_RASTER_SPLIT={value}: expected auto or 1 to {MAX_SPLIT}; tile lists stay whole"
+                "COCOG_RASTER_SPLIT={value}: expected auto or 1 to {MAX_SPLIT}; the adapter's default stays"
             );
-            RasterSplit::Fixed(1)
+            default
         }
     }
 }
@@ -211,7 +219,7 @@ impl Renderer {
             rasterize_backward: Default::default(),
             binding_limit: None,
             raster_block: block,
-            raster_split: raster_split_from_env(),
+            raster_split: raster_split_for(ctx),
         }
     }
 
@@ -521,7 +529,7 @@ impl Renderer {
     }
 
     /// Splits the compositing backward's tile lists as `split` says, where the default
-    /// (`COCOG_RASTER_SPLIT`, else unsplit) is not wanted.
+    /// (`raster_split_for`) is not wanted.
     pub fn with_raster_split(mut self, split: RasterSplit) -> Self {
         self.raster_split = split;
         self

@@ -73,6 +73,8 @@ pub struct BenchReport {
     pub cooperative_matrices: String,
     /// Cooperative matrices enabled (`COCOG_COOPERATIVE_MATRIX=1` where offered).
     pub cooperative_f16: bool,
+    /// How the compositing forward and backward ran (`COCOG_RASTER_BLOCK`, the tile-list split).
+    pub compositing: String,
     /// The block layout F's products take on them: `COCOG_COOP_BLOCK`'s where it fits the
     /// adapter, else the default one.
     pub coop_block: Option<String>,
@@ -429,6 +431,7 @@ fn measure(
         shader_f16: gpu.shader_f16,
         cooperative_matrices: gpu.cooperative_matrix_shapes(),
         cooperative_f16: gpu.cooperative.is_some(),
+        compositing: compositing_setting(gpu),
         coop_block: cocog_engine::Gemm::cooperative_block(gpu)
             .map(|b| b.name().unwrap_or("unnamed").to_owned()),
         width,
@@ -471,11 +474,10 @@ impl BenchReport {
         if let (Some(g), Some(rate)) = (self.compositor_gflop, self.compositor_gflop_per_s) {
             let share = 100.0 * self.phases_ms.compositor / self.phases_ms.total.max(1e-9);
             let path = match cocog_engine::nn::ConvPath::from_env() {
-                cocog_engine::nn::ConvPath::Gemm => "implicit GEMMs",
+                cocog_engine::nn::ConvPath::Gemm => "implicit GEMMs (COCOG_F_CONV=gemm)",
                 cocog_engine::nn::ConvPath::Tiled => "tiled (COCOG_F_CONV=tiled)",
                 cocog_engine::nn::ConvPath::Winograd => {
-                    "3×3 layers by Winograd F(2×2, 3×3), GFLOP counted as direct convolutions \
-                     (COCOG_F_CONV=winograd)"
+                    "3×3 layers by Winograd F(2×2, 3×3), GFLOP counted as direct convolutions"
                 }
                 cocog_engine::nn::ConvPath::Coop if self.cooperative_f16 => &format!(
                     "implicit GEMMs on tensor cores (COCOG_F_CONV=coop, block {})",
@@ -554,7 +556,7 @@ impl BenchReport {
             self.gaussians_end,
             self.start_iteration,
             self.method,
-            compositing_setting(),
+            self.compositing,
             self.it_per_s,
             self.ms_per_iteration,
             self.iterations,
@@ -587,22 +589,23 @@ fn yes_no(b: bool) -> &'static str {
     if b { "yes" } else { "no" }
 }
 
-/// How the compositing forward and backward run, as the environment sets them.
-fn compositing_setting() -> String {
-    use cocog_engine::splat::{RasterSplit, raster_block_from_env, raster_split_from_env};
+/// How the compositing forward and backward run on `gpu`'s adapter, as the environment sets
+/// them.
+fn compositing_setting(gpu: &cocog_engine::GpuContext) -> String {
+    use cocog_engine::splat::{RasterSplit, raster_block_from_env, raster_split_for};
     let block = if raster_block_from_env() == 8 {
         "8×8 blocks of each 16×16 tile (COCOG_RASTER_BLOCK=8)"
     } else {
         "16×16 tiles"
     };
-    let split = match raster_split_from_env() {
+    let split = match raster_split_for(gpu) {
         RasterSplit::Fixed(1) => "whole tile lists in the backward".to_owned(),
         RasterSplit::Fixed(n) => {
             format!("the backward walks each tile list in {n} chunks (COCOG_RASTER_SPLIT={n})")
         }
         RasterSplit::Auto => format!(
             "the backward splits tile lists into chunks for about {} workgroups \
-             (COCOG_RASTER_SPLIT=auto)",
+             (COCOG_RASTER_SPLIT=auto, a GPU's default)",
             cocog_engine::splat::SPLIT_TARGET
         ),
     };
