@@ -9,6 +9,9 @@ use super::precision::MapPrecision;
 use crate::core::{Bind, GpuBuffer, GpuContext, Kernel, Recorder, Workspace, shader};
 use crate::prims::AddInto;
 
+/// Values a workgroup of norm.wgsl's element kernels takes (256 invocations, PER_INVOCATION each).
+const NORM_ELEMENTS_PER_GROUP: u32 = 1024;
+
 /// How the renders are weighted.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum CompositeMode {
@@ -471,7 +474,7 @@ impl Compositor {
         self.norm_apply.dispatch_1d(
             rec,
             &[(0, &u), (1, &l.0), (2, &l.1), (3, &l.2)],
-            (planes * size).div_ceil(256),
+            (planes * size).div_ceil(NORM_ELEMENTS_PER_GROUP),
         );
     }
 
@@ -633,7 +636,7 @@ impl Compositor {
                 (5, v_z),
                 (6, grad_stats),
             ],
-            (planes * size).div_ceil(256),
+            (planes * size).div_ceil(NORM_ELEMENTS_PER_GROUP),
         );
     }
 }
