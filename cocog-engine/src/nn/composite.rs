@@ -139,9 +139,10 @@ pub struct Compositor {
     tile: Option<ConvTile>,
     /// Their 3×3 forwards and input gradients by Winograd, with `ConvPath::Winograd`.
     winograd: Option<ConvWinograd>,
-    /// The one-channel head's forward and weight gradient, direct: a 64-row GEMM tile would
-    /// compute 63 rows for nothing.
+    /// The one-channel head's forward, input and weight gradients, direct (conv.wgsl): a
+    /// 64-row GEMM tile would compute 63 rows for nothing.
     conv: Kernel,
+    conv_input: Kernel,
     conv_weight_parts: Kernel,
     conv_weight_sum: Kernel,
     norm_stats: Kernel,
@@ -191,6 +192,7 @@ impl Compositor {
             winograd: (path == ConvPath::Winograd && ConvWinograd::fits(ctx, config.channels))
                 .then(|| ConvWinograd::new(ctx, precision)),
             conv: Kernel::new(ctx, &conv, "conv_forward"),
+            conv_input: Kernel::new(ctx, &conv, "conv_input_grad"),
             conv_weight_parts: Kernel::new(ctx, &conv, "conv_weight_grad_part"),
             conv_weight_sum: Kernel::new(ctx, &conv, "conv_weight_grad_sum"),
             norm_stats: Kernel::new(ctx, &norm, "norm_stats"),
@@ -432,8 +434,7 @@ impl Compositor {
         }
     }
 
-    /// The head's forward, one thread per output value, into the logits of renders
-    /// `size.image0`.. .
+    /// The head's forward, one thread per pixel, into the logits of renders `size.image0`.. .
     fn conv_forward(
         &self,
         rec: &mut Recorder,
@@ -443,13 +444,45 @@ impl Compositor {
         output: &dyn Bind,
         size: MapSize,
     ) {
-        let u = Self::conv_uniform(rec, layer, size);
-        let total = size.images * layer.1 * size.width * size.height;
+        let u = Self::head_uniform(rec, layer, size);
         self.conv.dispatch_1d(
             rec,
             &[(0, &u), (1, params), (2, input), (3, output)],
-            total.div_ceil(256),
+            (size.images * size.width * size.height).div_ceil(256),
         );
+    }
+
+    /// The gradient of the head's input (the chunk's maps) from every render's logit gradient,
+    /// one thread per pixel.
+    fn head_input_grad(
+        &self,
+        rec: &mut Recorder,
+        layer: ConvLayer,
+        size: MapSize,
+        params: &dyn Bind,
+        v_out: &dyn Bind,
+        v_in: &dyn Bind,
+    ) {
+        let u = Self::head_uniform(rec, layer, size);
+        self.conv_input.dispatch_1d(
+            rec,
+            &[(0, &u), (1, params), (4, v_out), (5, v_in)],
+            (size.images * size.width * size.height).div_ceil(256),
+        );
+    }
+
+    /// conv.wgsl's uniform, for the one layer its kernels take: 3×3, one output, no bias.
+    fn head_uniform(
+        rec: &mut Recorder,
+        layer: ConvLayer,
+        size: MapSize,
+    ) -> crate::core::UniformSlot {
+        let (_, cout, k, _, bias) = layer;
+        assert!(
+            cout == 1 && k == 3 && bias == NO_BIAS,
+            "conv.wgsl takes a 3×3 one-output layer without bias, not {layer:?}"
+        );
+        Self::conv_uniform(rec, layer, size)
     }
 
     fn norm_uniform(rec: &mut Recorder, planes: u32, size: u32) -> crate::core::UniformSlot {
@@ -568,7 +601,7 @@ impl Compositor {
         let g = &self.gemm;
         // head: weights, then the gradient of its input y2.
         self.weight_grads(rec, ws, head, &l2.1, v_logits, v_params, size);
-        self.conv_input_grad(rec, ws, head, size, params, v_logits, v_y);
+        self.head_input_grad(rec, head, size, params, v_logits, v_y);
         self.relu_norm_backward(rec, l2, v_y, v_z, grad_stats, planes, pixels);
         match self.winograd_for(c2, false) {
             Some(w) => w.weight_grad(rec, ws, c2, local, &l1.1, v_z, v_params),
@@ -591,9 +624,8 @@ impl Compositor {
         v_params: &dyn Bind,
         size: MapSize,
     ) {
-        let u = Self::conv_uniform(rec, layer, size);
-        let (cin, cout, k, _, bias) = layer;
-        let count = cout * cin * k * k + if bias == NO_BIAS { 0 } else { cout };
+        let u = Self::head_uniform(rec, layer, size);
+        let count = layer.0 * 9;
         let (_, parts) = weight_grad_split(size.images * size.width * size.height);
         let partials = ws.buffer(
             rec.ctx(),
@@ -603,7 +635,7 @@ impl Compositor {
         self.conv_weight_parts.dispatch(
             rec,
             &[(0, &u), (2, input), (4, v_out), (7, &partials)],
-            [count.div_ceil(64), parts, 1],
+            [layer.0, parts, 1],
         );
         self.conv_weight_sum
             .dispatch_1d(rec, &[(0, &u), (6, v_params), (7, &partials)], count);
