@@ -139,6 +139,9 @@ pub struct Compositor {
     tile: Option<ConvTile>,
     /// Their 3×3 forwards and input gradients by Winograd, with `ConvPath::Winograd`.
     winograd: Option<ConvWinograd>,
+    /// With `ConvPath::Winograd`, the first (5×5, rgb) layer's forward one pixel per
+    /// invocation (conv_first.wgsl).
+    first: Option<Kernel>,
     /// The one-channel head's forward, input and weight gradients, direct (conv.wgsl): a
     /// 64-row GEMM tile would compute 63 rows for nothing.
     conv: Kernel,
@@ -191,6 +194,10 @@ impl Compositor {
             tile: (path == ConvPath::Tiled).then(|| ConvTile::new(ctx, precision)),
             winograd: (path == ConvPath::Winograd && ConvWinograd::fits(ctx, config.channels))
                 .then(|| ConvWinograd::new(ctx, precision)),
+            first: (path == ConvPath::Winograd).then(|| {
+                let m = with_maps("compositor first layer", include_str!("conv_first.wgsl"));
+                Kernel::new(ctx, &m, "first_forward")
+            }),
             conv: Kernel::new(ctx, &conv, "conv_forward"),
             conv_input: Kernel::new(ctx, &conv, "conv_input_grad"),
             conv_weight_parts: Kernel::new(ctx, &conv, "conv_weight_grad_part"),
@@ -402,6 +409,19 @@ impl Compositor {
     ) {
         if let Some(w) = self.winograd_for(layer, false).filter(|_| !rgba) {
             return w.forward(rec, ws, layer, size, params, input, output);
+        }
+        if let Some(first) = self.first.as_ref().filter(|_| rgba) {
+            let (cin, _, k, _, _) = layer;
+            assert!(
+                cin == 3 && k == 5,
+                "conv_first.wgsl takes F's 5×5 rgb layer, not {layer:?}"
+            );
+            let u = Self::conv_uniform(rec, layer, size);
+            return first.dispatch_1d(
+                rec,
+                &[(0, &u), (1, params), (2, input), (3, output)],
+                (size.images * size.width * size.height).div_ceil(256),
+            );
         }
         match &self.tile {
             Some(t) => t.forward(rec, layer, size, params, input, output, rgba),
