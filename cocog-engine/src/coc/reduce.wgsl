@@ -10,11 +10,23 @@ var<workgroup> sums: array<vec2<f32>, 256>;
 
 @compute @workgroup_size(256)
 fn focus_sum(@builtin(local_invocation_index) lid: u32) {
-    var s = vec2<f32>(0.0);
-    for (var n = lid; n < step.n; n += 256u) {
-        s += focus_terms[n];
+    // Four running sums, so four loads are in flight (one chain of 230 loads per invocation
+    // took 0.1 ms for 58k Gaussians on an H200).
+    var s0 = vec2<f32>(0.0);
+    var s1 = vec2<f32>(0.0);
+    var s2 = vec2<f32>(0.0);
+    var s3 = vec2<f32>(0.0);
+    var n = lid;
+    for (; n + 768u < step.n; n += 1024u) {
+        s0 += focus_terms[n];
+        s1 += focus_terms[n + 256u];
+        s2 += focus_terms[n + 512u];
+        s3 += focus_terms[n + 768u];
     }
-    sums[lid] = s;
+    for (; n < step.n; n += 256u) {
+        s0 += focus_terms[n];
+    }
+    sums[lid] = (s0 + s1) + (s2 + s3);
     for (var w = 128u; w > 0u; w >>= 1u) {
         workgroupBarrier();
         if lid < w {
