@@ -139,9 +139,8 @@ pub struct Compositor {
     tile: Option<ConvTile>,
     /// Their 3×3 forwards and input gradients by Winograd, with `ConvPath::Winograd`.
     winograd: Option<ConvWinograd>,
-    /// With `ConvPath::Winograd`, the first (5×5, rgb) layer's forward one pixel per
-    /// invocation (conv_first.wgsl).
-    first: Option<Kernel>,
+    /// With `ConvPath::Winograd`, the first (5×5, rgb) layer's kernels (conv_first.wgsl).
+    first: Option<FirstLayer>,
     /// The one-channel head's forward, input and weight gradients, direct (conv.wgsl): a
     /// 64-row GEMM tile would compute 63 rows for nothing.
     conv: Kernel,
@@ -196,7 +195,21 @@ impl Compositor {
                 .then(|| ConvWinograd::new(ctx, precision)),
             first: (path == ConvPath::Winograd).then(|| {
                 let m = with_maps("compositor first layer", include_str!("conv_first.wgsl"));
-                Kernel::new(ctx, &m, "first_forward")
+                FirstLayer {
+                    forward: Kernel::labelled(ctx, &m, "first_forward", "conv first forward"),
+                    weight_part: Kernel::labelled(
+                        ctx,
+                        &m,
+                        "first_weight_part",
+                        "conv first weight grad",
+                    ),
+                    weight_sum: Kernel::labelled(
+                        ctx,
+                        &m,
+                        "first_weight_sum",
+                        "conv first weight grad (sum)",
+                    ),
+                }
             }),
             conv: Kernel::new(ctx, &conv, "conv_forward"),
             conv_input: Kernel::new(ctx, &conv, "conv_input_grad"),
@@ -417,7 +430,7 @@ impl Compositor {
                 "conv_first.wgsl takes F's 5×5 rgb layer, not {layer:?}"
             );
             let u = Self::conv_uniform(rec, layer, size);
-            return first.dispatch_1d(
+            return first.forward.dispatch_1d(
                 rec,
                 &[(0, &u), (1, params), (2, input), (3, output)],
                 (size.images * size.width * size.height).div_ceil(256),
@@ -629,7 +642,10 @@ impl Compositor {
         }
         self.conv_input_grad(rec, ws, c2, local, params, v_z, v_y);
         self.relu_norm_backward(rec, l1, v_y, v_z, grad_stats, planes, pixels);
-        g.weight_grad(rec, ws, c1, size, renders, v_z, v_params, true);
+        match &self.first {
+            Some(first) => first.weight_grad(rec, ws, c1, size, renders, v_z, v_params),
+            None => g.weight_grad(rec, ws, c1, size, renders, v_z, v_params, true),
+        }
     }
 
     /// The head's weight gradient: partial sums over ranges of pixels, then one fixed-order
@@ -689,6 +705,78 @@ impl Compositor {
                 (6, grad_stats),
             ],
             (planes * size).div_ceil(NORM_ELEMENTS_PER_GROUP),
+        );
+    }
+}
+
+/// F's first layer (5×5, rgb → C) as conv_first.wgsl computes it.
+#[derive(Debug)]
+struct FirstLayer {
+    forward: Kernel,
+    weight_part: Kernel,
+    weight_sum: Kernel,
+}
+
+impl FirstLayer {
+    /// Pixels of a staged slice, columns of the result (75 weights and the bias), output
+    /// channels per workgroup (conv_first.wgsl's SLICE, COLUMNS, 64).
+    const SLICE: u32 = 16;
+    const COLUMNS: u32 = 76;
+    const BLOCK: u32 = 64;
+    /// Ranges of pixels the weight gradient sums apart, at most: enough workgroups to fill a
+    /// GPU, each range at least a workgroup's width of pixels.
+    const MAX_RANGES: u32 = 1024;
+
+    /// The layer's weight and bias gradients from its output's gradient `v_out` (the chunk's
+    /// maps) and renders `size.image0`.., written into `v_params`.
+    #[allow(clippy::too_many_arguments)]
+    fn weight_grad(
+        &self,
+        rec: &mut Recorder,
+        ws: &mut Workspace,
+        layer: ConvLayer,
+        size: MapSize,
+        renders: &dyn Bind,
+        v_out: &dyn Bind,
+        v_params: &dyn Bind,
+    ) {
+        let (cin, cout, k, w_off, bias_off) = layer;
+        assert!(
+            cin == 3 && k == 5,
+            "conv_first.wgsl takes F's 5×5 rgb layer, not {layer:?}"
+        );
+        let positions = size.images * size.width * size.height;
+        let ranges = positions.div_ceil(256).clamp(1, Self::MAX_RANGES);
+        let per_part = positions.div_ceil(ranges).next_multiple_of(Self::SLICE);
+        let parts = positions.div_ceil(per_part).max(1);
+        let u = rec.uniform(&ConvU {
+            images: size.images,
+            cin,
+            cout,
+            k,
+            height: size.height,
+            width: size.width,
+            w_off,
+            bias_off,
+            pad: 0,
+            per_part,
+            parts,
+            image0: size.image0,
+        });
+        let partials = ws.buffer(
+            rec.ctx(),
+            "compositor first-layer partials",
+            u64::from(parts * cout * Self::COLUMNS) * 4,
+        );
+        self.weight_part.dispatch(
+            rec,
+            &[(0, &u), (2, renders), (4, v_out), (7, &partials)],
+            [parts, 1, cout.div_ceil(Self::BLOCK)],
+        );
+        self.weight_sum.dispatch_1d(
+            rec,
+            &[(0, &u), (6, v_params), (7, &partials)],
+            cout * Self::COLUMNS,
         );
     }
 }
