@@ -4,7 +4,8 @@
 #   bench/gpu-session.sh RESULTS [PHASE...]  (default: step peer-train tests)
 #
 # A 15-minute lease holds the machine's start (about 40 s on 2026-11-27) and about 800 s of
-# calls; a machine left idle for 30 s is gone. Measured on an H200 (2026-11-27), before the
+# calls; a machine left idle for 30 s is gone. The tests phase took about 90 s on 2026-11-27
+# (nn_compositor alone 36 s): give it 120. Measured on an H200 (2026-11-27), before the
 # step phase's raster-block and split-list runs were added (its block layouts are a phase of
 # their own now): step 45 s, peer-synthetic 85 s (65 of them gsplat's CUDA build), tests 55 s,
 # peer-train 250 s with gsplat built (plus four benches of at most 20 s after the peer now;
@@ -50,17 +51,18 @@
 #   train-split     peer-train's cocog run with the backward's tile lists split
 #                   (COCOG_RASTER_SPLIT, default auto), then `cocog eval`           ~80 s
 #   idle-bench      `cocog bench` rows of sharp-dev at 100×75 and 1M random Gaussians at 1080p
-#   tests           the GPU test executables (f64 references, finite differences)      ~55 s
+#   tests           the GPU test executables (f64 references, finite differences)      ~90 s
 #                   (TESTS="NAME ..." runs only those; gpu_coop_gemm alone takes seconds)
 #   gates SET...    bench/gates.sh's quality runs at once (--jobs 12), interrupted where they would
 #                   outrun the budget; the same command again continues them (e.g. `gates
 #                   12-small 12-variants`; a phase word ends the list)
-# #12's full-size gate with F on tensor cores, once the step phase has shown them fast (an
-# estimate, not a measurement: about 14 ms a cocog step at 400×300 if F reaches 50 TFLOP/s):
-#   COCOG_F_CONV=coop COCOG_COOPERATIVE_MATRIX=1 BUDGET=540 bench/gpu-session.sh RESULTS gates 12-full
-# or by Winograd (COCOG_F_CONV=winograd) where the step phase's 400×300 rows show that faster;
-# where both scenes do not fit a lease, `gates 12-full-table`, and `gates 12-full-shelf` on another.
-# (the four trainings share the GPU; stopped ones continue on the next call with the same line).
+# #12's full-size gate, one scene per lease (F by Winograd, the default): the cocog step at
+# 400×300 took 20.3 ms on an H200 on 2026-11-27 (about 17.8 ms since, an estimate), so a
+# 30000-iteration cocog run with the 3dgs run beside it needs about 10 minutes, more than one
+# call: `BUDGET=580 bench/gpu-session.sh RESULTS gates 12-full-table`, then at once the same
+# line again (BUDGET=what is left) to continue the stopped runs from their checkpoints on the
+# still-warm machine; `gates 12-full-shelf` on another lease
+# (the trainings share the GPU; stopped ones continue on the next call with the same line).
 # gsplat's CUDA code builds on its first call on a machine (60–80 s on 16 cores); later calls on
 # the same warm machine reuse it. A phase that finished leaves a marker in WORK, so a second call
 # on the same machine goes on with the phases the first did not finish. RESULTS gets session.txt (every
@@ -302,7 +304,7 @@ while ((i < ${#phases[@]})); do
         peer-train) run_phase peer-train 375 ;;
         train-split) run_phase train-split 120 ;;
         idle-bench) run_phase idle-bench 120 ;;
-        tests) run_phase tests 90 ;;
+        tests) run_phase tests 120 ;;
         gates)
             sets=()
             while ((i < ${#phases[@]})) && [[ "${phases[i]}" == [0-9]* ]]; do
