@@ -38,6 +38,28 @@ struct ConvU {
     image0: u32,
 }
 
+impl ConvU {
+    /// conv.wgsl's and conv_first.wgsl's uniform for `layer` on `size`, its weight gradient
+    /// split into ranges of `per_part` positions, `parts` of them.
+    fn new(layer: ConvLayer, size: MapSize, (per_part, parts): (u32, u32)) -> Self {
+        let (cin, cout, k, w_off, bias_off) = layer;
+        Self {
+            images: size.images,
+            cin,
+            cout,
+            k,
+            height: size.height,
+            width: size.width,
+            w_off,
+            bias_off,
+            pad: 0,
+            per_part,
+            parts,
+            image0: size.image0,
+        }
+    }
+}
+
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct NormU {
@@ -182,7 +204,10 @@ impl Compositor {
         let with_maps = |label: &str, source: &str| {
             shader(ctx, label, &format!("{}{source}", precision.prelude()))
         };
-        let conv = with_maps("compositor conv", include_str!("conv.wgsl"));
+        let conv = with_maps(
+            "compositor conv",
+            concat!(include_str!("conv_uniform.wgsl"), include_str!("conv.wgsl")),
+        );
         let norm = with_maps("compositor norm", include_str!("norm.wgsl"));
         let blend = shader(ctx, "compositor blend", include_str!("blend.wgsl"));
         Self {
@@ -193,7 +218,13 @@ impl Compositor {
             winograd: (path == ConvPath::Winograd && ConvWinograd::fits(ctx, config.channels))
                 .then(|| ConvWinograd::new(ctx, precision)),
             first: (path == ConvPath::Winograd).then(|| {
-                let m = with_maps("compositor first layer", include_str!("conv_first.wgsl"));
+                let m = with_maps(
+                    "compositor first layer",
+                    concat!(
+                        include_str!("conv_uniform.wgsl"),
+                        include_str!("conv_first.wgsl")
+                    ),
+                );
                 FirstLayer {
                     weight_part: Kernel::labelled(
                         ctx,
@@ -315,22 +346,8 @@ impl Compositor {
         layer: ConvLayer,
         size: MapSize,
     ) -> crate::core::UniformSlot {
-        let (cin, cout, k, w_off, bias_off) = layer;
-        let (per_part, parts) = weight_grad_split(size.images * size.width * size.height);
-        rec.uniform(&ConvU {
-            images: size.images,
-            cin,
-            cout,
-            k,
-            height: size.height,
-            width: size.width,
-            w_off,
-            bias_off,
-            pad: 0,
-            per_part,
-            parts,
-            image0: size.image0,
-        })
+        let split = weight_grad_split(size.images * size.width * size.height);
+        rec.uniform(&ConvU::new(layer, size, split))
     }
 
     /// Records F (in learned mode) and the composite of `images` rgba renders of `w`×`h`.
@@ -695,7 +712,7 @@ impl FirstLayer {
         v_out: &dyn Bind,
         v_params: &dyn Bind,
     ) {
-        let (cin, cout, k, w_off, bias_off) = layer;
+        let (cin, cout, k, _, _) = layer;
         assert!(
             cin == 3 && k == 5,
             "conv_first.wgsl takes F's 5×5 rgb layer, not {layer:?}"
@@ -704,20 +721,7 @@ impl FirstLayer {
         let ranges = positions.div_ceil(256).clamp(1, Self::MAX_RANGES);
         let per_part = positions.div_ceil(ranges).next_multiple_of(Self::SLICE);
         let parts = positions.div_ceil(per_part).max(1);
-        let u = rec.uniform(&ConvU {
-            images: size.images,
-            cin,
-            cout,
-            k,
-            height: size.height,
-            width: size.width,
-            w_off,
-            bias_off,
-            pad: 0,
-            per_part,
-            parts,
-            image0: size.image0,
-        });
+        let u = rec.uniform(&ConvU::new(layer, size, (per_part, parts)));
         let partials = ws.buffer(
             rec.ctx(),
             "compositor first-layer partials",

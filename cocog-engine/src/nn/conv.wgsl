@@ -5,27 +5,8 @@
 // workgroup in a fixed order: a thread per weight walking all pixels would leave a GPU with a
 // few hundred threads, each a long chain of dependent loads. Maps are [image][channel][y][x];
 // the input is a stored map (map_t, the prelude's).
+// The uniform `cv` is conv_uniform.wgsl's, prepended.
 
-struct Conv {
-    images: u32,
-    cin: u32,
-    cout: u32,
-    k: u32,
-    height: u32,
-    width: u32,
-    // Offsets into the parameter buffer; bias_off = 0xffffffff for none.
-    w_off: u32,
-    bias_off: u32,
-    pad: u32,
-    // The weight gradient's split: (image, pixel) positions per range, and ranges.
-    per_part: u32,
-    parts: u32,
-    // The chunk's first image in `output` (forward) and `v_out` (weight gradient), which hold
-    // every render's logits; `input` holds the chunk's maps alone.
-    image0: u32,
-}
-
-@group(0) @binding(0) var<uniform> cv: Conv;
 @group(0) @binding(1) var<storage, read> params: array<f32>;
 @group(0) @binding(2) var<storage, read> input: array<map_t>;
 @group(0) @binding(3) var<storage, read_write> output: array<f32>;

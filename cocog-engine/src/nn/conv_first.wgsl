@@ -1,24 +1,8 @@
 // F's first layer, a zero-padded 5×5 convolution from a render's rgb to C channels: its weight
 // and bias gradients. Renders are rgba [image][y][x][4] (f32); the gradient maps f32
 // [image][channel][y][x].
+// The uniform `cv` is conv_uniform.wgsl's, prepended.
 
-struct Conv {
-    images: u32,
-    cin: u32,
-    cout: u32,
-    k: u32,
-    height: u32,
-    width: u32,
-    w_off: u32,
-    bias_off: u32,
-    pad: u32,
-    per_part: u32,
-    parts: u32,
-    // The chunk's first render in `renders`; `v_out` holds the chunk's maps alone.
-    image0: u32,
-}
-
-@group(0) @binding(0) var<uniform> cv: Conv;
 @group(0) @binding(1) var<storage, read> params: array<f32>;
 @group(0) @binding(2) var<storage, read> renders: array<f32>;
 
