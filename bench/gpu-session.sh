@@ -7,7 +7,8 @@
 # calls; a machine left idle for 30 s is gone. The tests phase took about 90 s on 2026-11-27
 # (nn_compositor alone 36 s): give it 120. Measured on an H200 (2026-11-27), before the
 # step phase's raster-block and split-list runs were added (its block layouts are a phase of
-# their own now): step 45 s, peer-synthetic 85 s (65 of them gsplat's CUDA build), tests 55 s,
+# their own now): step 45 s, peer-synthetic 85 s (65 of them gsplat's CUDA build), tests 55 s (90 s
+# with nn_compositor's later cases),
 # peer-train 250 s with gsplat built (plus four benches of at most 20 s after the peer now;
 # peer-train builds gsplat when peer-synthetic has not). The default phases fit one call of
 # BUDGET=540, peer-train before tests so the phase the call is for starts with room to spare. A second call made at

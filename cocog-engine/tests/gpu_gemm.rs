@@ -116,6 +116,10 @@ fn split_k_sums_every_range_and_batch_once() {
             check(layout, 3, 10, 777, 1, 5);
             // Batches summed as well (a weight gradient over several images).
             check(layout, 16, 30, 1000, 4, 6);
+            // Slices (batches × parts) not a multiple of the reduce's four running sums: 3
+            // batches of K = 600 (at most three parts each), and one batch of 5 parts.
+            check(layout, 8, 12, 600, 3, 7);
+            check(layout, 64, 77, 1300, 1, 8);
         }
     }
 }

@@ -88,12 +88,13 @@ pub enum ConvPath {
     /// channels (conv_tile.rs). As fast as the GEMMs on lavapipe; unmeasured on a GPU.
     Tiled,
     /// The wide 3×3 layer's forward, input and weight gradients by Winograd's F(2×2, 3×3)
-    /// (conv_winograd.rs): 2.25× fewer multiply-adds than the implicit GEMMs; the 5×5 layer
-    /// and passes summing fewer channels than a slice stay implicit GEMMs.
+    /// (conv_winograd.rs): 2.25× fewer multiply-adds than the implicit GEMMs; the first
+    /// (5×5) layer's weight gradient by its own kernel (conv_first.wgsl). The default. The
+    /// 5×5 forward and passes summing fewer channels than a slice stay implicit GEMMs.
     Winograd,
     /// The implicit GEMMs on cooperative matrices (tensor cores) with f16 operands, where the
-    /// context enabled them (`COCOG_COOPERATIVE_MATRIX=1`), else `Gemm`. Experimental: never
-    /// run on a GPU yet.
+    /// context enabled them (`COCOG_COOPERATIVE_MATRIX=1`), else `Gemm`. Experimental:
+    /// checked against f64 on an H200, where at 400×300 it was slower than `Winograd`.
     Coop,
 }
 
@@ -108,7 +109,14 @@ impl ConvPath {
             Ok("tiled") => ConvPath::Tiled,
             Ok("coop") => ConvPath::Coop,
             Ok("gemm") => ConvPath::Gemm,
-            _ => ConvPath::Winograd,
+            Ok("winograd") | Err(_) => ConvPath::Winograd,
+            Ok(other) => {
+                // Said on stderr, as the other code-path switches do, rather than refused.
+                eprintln!(
+                    "COCOG_F_CONV={other}: expected gemm, tiled, winograd or coop; Winograd it is"
+                );
+                ConvPath::Winograd
+            }
         }
     }
 }
@@ -208,7 +216,14 @@ impl Compositor {
             "compositor conv",
             concat!(include_str!("conv_uniform.wgsl"), include_str!("conv.wgsl")),
         );
-        let norm = with_maps("compositor norm", include_str!("norm.wgsl"));
+        let norm = with_maps(
+            "compositor norm",
+            &format!(
+                "const PER_INVOCATION: u32 = {}u;\n{}",
+                NORM_ELEMENTS_PER_GROUP / 256,
+                include_str!("norm.wgsl")
+            ),
+        );
         let blend = shader(ctx, "compositor blend", include_str!("blend.wgsl"));
         Self {
             config,
@@ -220,7 +235,10 @@ impl Compositor {
             first: (path == ConvPath::Winograd).then(|| {
                 let m = with_maps(
                     "compositor first layer",
-                    concat!(
+                    &format!(
+                        "const SLICE: u32 = {}u;\nconst COLUMNS: u32 = {}u;\n{}{}",
+                        FirstLayer::SLICE,
+                        FirstLayer::COLUMNS,
                         include_str!("conv_uniform.wgsl"),
                         include_str!("conv_first.wgsl")
                     ),
@@ -690,8 +708,9 @@ struct FirstLayer {
 }
 
 impl FirstLayer {
-    /// Pixels of a staged slice, columns of the result (75 weights and the bias), output
-    /// channels per workgroup (conv_first.wgsl's SLICE, COLUMNS, 64).
+    /// Pixels of a staged slice and columns of the result (75 weights and the bias), which
+    /// conv_first.wgsl is compiled with, and output channels per workgroup (its 16 × 4 layout
+    /// of invocations).
     const SLICE: u32 = 16;
     const COLUMNS: u32 = 76;
     const BLOCK: u32 = 64;

@@ -23,9 +23,8 @@ const INPUTS: u32 = 75u;
 // [range][output channel][j].
 @group(0) @binding(7) var<storage, read_write> partials: array<f32>;
 
-const SLICE: u32 = 16u;
-// Columns of the result: 75 inputs and the bias, padded to 16 blocks of 5.
-const COLUMNS: u32 = 76u;
+// SLICE (pixels per staged slice) and COLUMNS (75 inputs and the bias) are prepended by
+// composite.rs's FirstLayer; the columns are padded to 16 blocks of 5.
 const PADDED: u32 = 80u;
 
 // [pixel][output channel / 4] and [pixel][column].

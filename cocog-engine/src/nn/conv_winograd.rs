@@ -14,7 +14,8 @@ const BLOCK_M: u32 = 64;
 /// many ranges it sums apart.
 const SLICE: u32 = 16;
 const TARGET_PARTS: u32 = 128;
-/// Channel pairs per workgroup of the sum (conv_winograd_grad.wgsl's SUM_PAIRS).
+/// Channel pairs per workgroup of the sum, which conv_winograd_grad.wgsl is compiled with
+/// (16 pairs × 16 positions make its 256 invocations).
 const SUM_PAIRS: u32 = 16;
 /// Positions of a transformed 4×4 tile.
 const POSITIONS: u64 = 16;
@@ -120,7 +121,7 @@ impl WeightGrad {
     fn new(ctx: &GpuContext, precision: MapPrecision) -> Self {
         let label = "conv winograd weight grad";
         let source = format!(
-            "{}alias in_t = map_t;\n{}",
+            "{}alias in_t = map_t;\nconst SUM_PAIRS: u32 = {SUM_PAIRS}u;\n{}",
             precision.prelude(),
             concat!(
                 include_str!("conv_winograd_common.wgsl"),

@@ -158,8 +158,8 @@ fn winograd_weight_part(
 // that position's ranges in range order, then one per pair and weight forms ∂g = Gᵀ ∂U G into
 // the layer's W[m][c][ky][kx]; the pairs of summed channel 0 also write the bias gradient.
 // One invocation per pair summing all 16 positions left the sums a chain of 16 × ranges
-// dependent loads in 4096 invocations, 0.65 ms on an H200.
-const SUM_PAIRS: u32 = 16u;
+// dependent loads in 4096 invocations, 0.65 ms on an H200. SUM_PAIRS (16, so that 16 pairs ×
+// 16 positions fill the 256 invocations) is prepended by conv_winograd.rs.
 var<workgroup> sums: array<f32, 16u * SUM_PAIRS>;
 
 @compute @workgroup_size(256)

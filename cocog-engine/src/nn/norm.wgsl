@@ -1,7 +1,8 @@
 // ReLU then InstanceNorm (no affine, biased variance, ε 1e-5) over each (image, channel) plane
 // of [image][channel][y][x] maps, and its adjoint. The pre-activation and normalised output
-// are stored as map_t (the prelude's: f16 or f32); statistics and gradients are f32. The statistics kernels run one workgroup
-// per plane; the element kernels one thread per value.
+// are stored as map_t (the prelude's: f16 or f32); statistics and gradients are f32. The
+// statistics kernels run one workgroup per plane; the element kernels take PER_INVOCATION
+// values per invocation (composite.rs prepends it).
 
 struct Norm {
     planes: u32,
@@ -78,9 +79,8 @@ fn norm_stats(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg
     }
 }
 
-// The element kernels take four values per invocation, 256 apart so each load is coalesced
-// across a subgroup: at one value each, norm_apply moved 1.2 TB/s on an H200.
-const PER_INVOCATION: u32 = 4u;
+// The element kernels take PER_INVOCATION values per invocation, 256 apart so each load is
+// coalesced across a subgroup: at one value each, norm_apply moved 1.2 TB/s on an H200.
 
 fn first_element(wg: vec3<u32>, nwg: vec3<u32>, lid: u32) -> u32 {
     return (wg.y * nwg.x + wg.x) * 256u * PER_INVOCATION + lid;

@@ -465,17 +465,21 @@ impl Gemm {
         }
     }
 
-    /// Parts of K per batch: enough workgroups to fill the device, at least `MIN_K_SPLIT` of
-    /// K each.
-    fn parts(&self, shape: &GemmShape, tiles: u32) -> u32 {
+    /// Parts of K per batch: enough workgroups for about `TARGET_INVOCATIONS`, at least
+    /// `MIN_K_SPLIT` of K each, and no more than the partials' binding holds.
+    fn parts(&self, shape: &GemmShape, tiles: u32, binding_limit: u64) -> u32 {
         if !self.layout.split_k {
             return 1;
         }
         let by_work = shape.k.div_ceil(MIN_K_SPLIT).max(1);
         let groups = TARGET_INVOCATIONS.div_ceil(self.invocations());
         let by_grid = groups.div_ceil(tiles * shape.batches.max(1)).max(1);
+        let slice_bytes =
+            u64::from(shape.batches.max(1)) * u64::from(shape.m) * u64::from(shape.n) * 4;
+        let by_binding = u32::try_from(binding_limit / slice_bytes.max(1)).unwrap_or(u32::MAX);
         by_work
             .min(by_grid)
+            .min(by_binding)
             .min(65_535 / shape.batches.max(1))
             .max(1)
     }
@@ -493,7 +497,7 @@ impl Gemm {
         }
         let (bm, bn, bk) = self.block();
         let tiles = shape.m.div_ceil(bm) * shape.n.div_ceil(bn);
-        let parts = self.parts(&shape, tiles);
+        let parts = self.parts(&shape, tiles, rec.ctx().binding_limit());
         let k_split = shape.k.div_ceil(parts).next_multiple_of(bk).max(bk);
         let parts = shape.k.div_ceil(k_split).max(1);
         let dims = rec.uniform(&Dims {

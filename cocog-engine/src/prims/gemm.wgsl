@@ -99,7 +99,8 @@ fn gemm_tile(
     }
 }
 
-// One thread per C(m, n): the partial products of every batch and part, summed in order.
+// One thread per C(m, n): the partial products of every batch and part, summed in a fixed order
+// (four interleaved running sums, then their pairs).
 @compute @workgroup_size(256)
 fn gemm_reduce(
     @builtin(workgroup_id) wg: vec3<u32>,
