@@ -410,6 +410,14 @@ fn gpu_learned_mode_past_one_block_of_tiles_matches_the_reference() {
     gpu_case(CompositeMode::Learned, 72, 2, 19, 18, 11);
 }
 
+/// 66 channels: the first layer's weight gradient has a second block of output channels, not a
+/// multiple of four, and the Winograd weight sum a last workgroup of channel pairs short
+/// (66² = 4356 pairs, 4 past a multiple of its 16).
+#[test]
+fn gpu_learned_mode_with_ragged_channel_blocks_matches_the_reference() {
+    gpu_case(CompositeMode::Learned, 66, 2, 11, 9, 13);
+}
+
 /// More tiles than the Winograd weight gradient's ranges take in one slice each (4232 tiles in
 /// 89 ranges of 48, 3 slices), the last range short.
 #[test]
