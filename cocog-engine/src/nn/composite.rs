@@ -214,7 +214,7 @@ impl Compositor {
         };
         let conv = with_maps(
             "compositor conv",
-            concat!(include_str!("conv_uniform.wgsl"), include_str!("conv.wgsl")),
+            concat!(include_str!("conv_common.wgsl"), include_str!("conv.wgsl")),
         );
         let norm = with_maps(
             "compositor norm",
@@ -239,7 +239,7 @@ impl Compositor {
                         "const SLICE: u32 = {}u;\nconst COLUMNS: u32 = {}u;\n{}{}",
                         FirstLayer::SLICE,
                         FirstLayer::COLUMNS,
-                        include_str!("conv_uniform.wgsl"),
+                        include_str!("conv_common.wgsl"),
                         include_str!("conv_first.wgsl")
                     ),
                 );
@@ -714,9 +714,6 @@ impl FirstLayer {
     const SLICE: u32 = 16;
     const COLUMNS: u32 = 76;
     const BLOCK: u32 = 64;
-    /// Ranges of pixels the weight gradient sums apart, at most: enough workgroups to fill a
-    /// GPU, each range at least a workgroup's width of pixels.
-    const MAX_RANGES: u32 = 1024;
 
     /// The layer's weight and bias gradients from its output's gradient `v_out` (the chunk's
     /// maps) and renders `size.image0`.., written into `v_params`.
@@ -736,9 +733,9 @@ impl FirstLayer {
             cin == 3 && k == 5,
             "conv_first.wgsl takes F's 5×5 rgb layer, not {layer:?}"
         );
+        // The head's split, its ranges whole slices.
         let positions = size.images * size.width * size.height;
-        let ranges = positions.div_ceil(256).clamp(1, Self::MAX_RANGES);
-        let per_part = positions.div_ceil(ranges).next_multiple_of(Self::SLICE);
+        let per_part = weight_grad_split(positions).0.next_multiple_of(Self::SLICE);
         let parts = positions.div_ceil(per_part).max(1);
         let u = rec.uniform(&ConvU::new(layer, size, (per_part, parts)));
         let partials = ws.buffer(

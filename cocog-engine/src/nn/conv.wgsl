@@ -5,15 +5,13 @@
 // workgroup in a fixed order: a thread per weight walking all pixels would leave a GPU with a
 // few hundred threads, each a long chain of dependent loads. Maps are [image][channel][y][x];
 // the input is a stored map (map_t, the prelude's).
-// The uniform `cv` is conv_uniform.wgsl's, prepended.
+// The uniform `cv`, `partials` and `ranges_total` are conv_common.wgsl's, prepended.
 
 @group(0) @binding(1) var<storage, read> params: array<f32>;
 @group(0) @binding(2) var<storage, read> input: array<map_t>;
 @group(0) @binding(3) var<storage, read_write> output: array<f32>;
 @group(0) @binding(4) var<storage, read> v_out: array<f32>;
 @group(0) @binding(6) var<storage, read_write> v_params: array<f32>;
-// [range][weight, then bias].
-@group(0) @binding(7) var<storage, read_write> partials: array<f32>;
 
 const NO_BIAS: u32 = 0xffffffffu;
 
@@ -111,8 +109,6 @@ fn conv_weight_grad_part(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_in
     partials[wg.y * count + t] = s;
 }
 
-var<workgroup> sums: array<f32, 256>;
-
 // One workgroup per weight: its ranges' partial sums, added in a fixed order.
 @compute @workgroup_size(256)
 fn conv_weight_grad_sum(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
@@ -121,23 +117,13 @@ fn conv_weight_grad_sum(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workg
     if t >= count {
         return;
     }
-    var s = 0.0;
-    for (var r = lid; r < cv.parts; r += 256u) {
-        s += partials[r * count + t];
-    }
-    sums[lid] = s;
-    for (var w = 128u; w > 0u; w >>= 1u) {
-        workgroupBarrier();
-        if lid < w {
-            sums[lid] += sums[lid + w];
-        }
-    }
+    let total = ranges_total(lid, t, count);
     if lid == 0u {
         let weights = cv.cout * cv.cin * cv.k * cv.k;
         if t >= weights {
-            v_params[cv.bias_off + t - weights] = sums[0];
+            v_params[cv.bias_off + t - weights] = total;
         } else {
-            v_params[cv.w_off + t] = sums[0];
+            v_params[cv.w_off + t] = total;
         }
     }
 }

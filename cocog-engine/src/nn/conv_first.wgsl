@@ -1,7 +1,7 @@
 // F's first layer, a zero-padded 5×5 convolution from a render's rgb to C channels: its weight
 // and bias gradients. Renders are rgba [image][y][x][4] (f32); the gradient maps f32
 // [image][channel][y][x].
-// The uniform `cv` is conv_uniform.wgsl's, prepended.
+// The uniform `cv`, `partials` and `ranges_total` are conv_common.wgsl's, prepended.
 
 @group(0) @binding(1) var<storage, read> params: array<f32>;
 @group(0) @binding(2) var<storage, read> renders: array<f32>;
@@ -20,8 +20,6 @@ const INPUTS: u32 = 75u;
 
 @group(0) @binding(4) var<storage, read> v_out: array<f32>;
 @group(0) @binding(6) var<storage, read_write> v_params: array<f32>;
-// [range][output channel][j].
-@group(0) @binding(7) var<storage, read_write> partials: array<f32>;
 
 // SLICE (pixels per staged slice) and COLUMNS (75 inputs and the bias) are prepended by
 // composite.rs's FirstLayer; the columns are padded to 16 blocks of 5.
@@ -122,8 +120,6 @@ fn store_partial(range: u32, co: u32, j: u32, v: vec4<f32>) {
     }
 }
 
-var<workgroup> sums: array<f32, 256>;
-
 // One workgroup per (output channel, column): its ranges added in a fixed order.
 @compute @workgroup_size(256)
 fn first_weight_sum(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
@@ -131,26 +127,17 @@ fn first_weight_sum(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroup
     if t >= cv.cout * COLUMNS {
         return;
     }
-    var s = 0.0;
-    for (var r = lid; r < cv.parts; r += 256u) {
-        s += partials[r * cv.cout * COLUMNS + t];
-    }
-    sums[lid] = s;
-    for (var w = 128u; w > 0u; w >>= 1u) {
-        workgroupBarrier();
-        if lid < w {
-            sums[lid] += sums[lid + w];
-        }
-    }
+    // Partials are [range][output channel][column].
+    let total = ranges_total(lid, t, cv.cout * COLUMNS);
     if lid == 0u {
         let co = t / COLUMNS;
         let j = t % COLUMNS;
         if j == INPUTS {
             if cv.bias_off != 0xffffffffu {
-                v_params[cv.bias_off + co] = sums[0];
+                v_params[cv.bias_off + co] = total;
             }
         } else {
-            v_params[cv.w_off + co * INPUTS + j] = sums[0];
+            v_params[cv.w_off + co * INPUTS + j] = total;
         }
     }
 }
