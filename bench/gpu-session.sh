@@ -29,9 +29,11 @@
 #                   and with its 3×3 layers by Winograd (the default), and with F's maps
 #                   in f32 (COCOG_NO_F16=1) as well as f16, with the per-kernel split
 #                   (--kernels), and on tensor cores (COCOG_F_CONV=coop, f16 operands,
-#                   experimental), and both steps compositing in 8×8 blocks
-#                   (COCOG_RASTER_BLOCK=8) or with the backward's tile lists whole
-#                   (COCOG_RASTER_SPLIT=1; a GPU's default splits them); then at 400×300 on the same Gaussians the 3dgs
+#                   experimental), and both steps compositing in 8×8 blocks on both sides
+#                   (COCOG_RASTER_BLOCK=8), in 16×16 tiles on both sides (=16; the default
+#                   forward is in 8×8 blocks, the backward in tiles) or with the backward's tile
+#                   lists whole (COCOG_RASTER_SPLIT=1; a GPU's default splits them); then at
+#                   400×300 on the same Gaussians the 3dgs
 #                   step (each of those settings, and 4 chunks) and the cocog step (what a step
 #                   of #12's full-size gate costs), F on the f32 products, by Winograd and on
 #                   tensor cores in the default block layout  ~105 s on an H200 (an estimate)
@@ -155,15 +157,17 @@ phase_step() {
     local model
     model=$(step_model) || return 1
     local m vars
-    for m in 3dgs cocog cocog-tiled cocog-winograd cocog-f32 cocog-coop 3dgs-b8 cocog-b8 3dgs-whole cocog-whole; do
+    for m in 3dgs cocog cocog-tiled cocog-winograd cocog-f32 cocog-coop 3dgs-b8 cocog-b8 3dgs-b16 cocog-b16 3dgs-whole cocog-whole; do
         echo "-- $m step on the model's Gaussians" >>"$log"
         vars=(COCOG_F_CONV=gemm)  # the rows named cocog-winograd time the default
         [[ $m == *-tiled ]] && vars=(COCOG_F_CONV=tiled)
         [[ $m == *-winograd ]] && vars=(COCOG_F_CONV=winograd)
         [[ $m == *-coop ]] && vars=(COCOG_F_CONV=coop COCOG_COOPERATIVE_MATRIX=1)
         [[ $m == *-f32 ]] && vars+=(COCOG_NO_F16=1)
-        # Compositing in 8×8 blocks of a tile (four times the workgroups on a 100×75 frame).
+        # Compositing in 8×8 blocks of a tile, the backward too (the default forward's), or in
+        # whole 16×16 tiles, the forward too (the default backward's).
         [[ $m == *-b8 ]] && vars+=(COCOG_RASTER_BLOCK=8)
+        [[ $m == *-b16 ]] && vars+=(COCOG_RASTER_BLOCK=16)
         # The compositing backward walking each tile's list whole (a GPU's default splits them).
         [[ $m == *-whole ]] && vars+=(COCOG_RASTER_SPLIT=1)
         bounded 60 "${clean_env[@]}" "${vars[@]}" "$cocog" bench "$work/in-dev-table" --downscale 4 \
@@ -225,10 +229,11 @@ phase_peer_synthetic() {
         --out "$results/gsplat-synthetic.json" --iterations 20 --warmup 5 >>"$log" 2>&1
 }
 
-# The compositing settings the benches compare: whole tile lists in the backward, 8×8 blocks,
-# and tile lists split (as many chunks as RasterSplit::Auto picks, a GPU's default, and 4).
-raster_settings=("COCOG_RASTER_SPLIT=1" "COCOG_RASTER_BLOCK=8" "COCOG_RASTER_SPLIT=auto"
-    "COCOG_RASTER_SPLIT=4")
+# The compositing settings the benches compare: whole tile lists in the backward, 8×8 blocks
+# on both sides, 16×16 tiles on both sides (the forward's default is 8×8 blocks), and tile lists
+# split (as many chunks as RasterSplit::Auto picks, a GPU's default, and 4).
+raster_settings=("COCOG_RASTER_SPLIT=1" "COCOG_RASTER_BLOCK=8" "COCOG_RASTER_BLOCK=16"
+    "COCOG_RASTER_SPLIT=auto" "COCOG_RASTER_SPLIT=4")
 
 # cocog's side of peer-train: sharp-dev at 400×300, 30000 iterations of 3dgs, timed, then scored.
 train_sharp_dev() {

@@ -59,8 +59,8 @@ pub use prims::{
     SortCount,
 };
 pub use splat::{
-    Batch, Crop, ForwardState, Frame, Gradients, ImageSpec, ParamBuffers, RasterSplit,
-    RenderedImage, Renderer, bytes_per_gaussian, check_fits, check_fits_at,
+    Batch, Crop, ForwardState, Frame, Gradients, ImageSpec, ParamBuffers, RasterBlocks,
+    RasterSplit, RenderedImage, Renderer, bytes_per_gaussian, check_fits, check_fits_at,
 };
 pub use types::{
     ALPHA_MAX, ALPHA_MIN, Camera, GaussianGrads, GaussianParams, LOW_PASS, MAX_SH_DEGREE,

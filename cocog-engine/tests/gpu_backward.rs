@@ -5,7 +5,9 @@ mod common;
 
 use cocog_engine::reference::{Gaussians64, raster_backward, render_backward};
 use cocog_engine::splat::MAX_SPLIT;
-use cocog_engine::{Batch, Camera, GaussianParams, GpuContext, RasterSplit, Renderer, View};
+use cocog_engine::{
+    Batch, Camera, GaussianParams, GpuContext, RasterBlocks, RasterSplit, Renderer, View,
+};
 use common::{gpu, random_scene, random_weights, scenes_per_camera, test_camera, views_of};
 
 fn group_names(g: &GaussianParams) -> Vec<&'static str> {
@@ -191,17 +193,26 @@ fn backward_without_the_depth_channel_matches_reference() {
     }
 }
 
-/// The backward in 8×8 blocks of a tile (`with_raster_block`, forward too): both accumulation paths,
+/// The backward in 8×8 blocks of a tile (`RasterBlocks::both(8)`, forward too): both accumulation paths,
 /// with and without the depth channel, then a batch of frames whose sides are multiples of
 /// neither 8 nor 16.
 #[test]
 fn backward_in_8x8_blocks_matches_reference() {
     let Some(ctx) = gpu() else { return };
     for (renderer, seed, depth) in [
-        (Renderer::new(ctx).with_raster_block(ctx, 8), 31, true),
-        (Renderer::new(ctx).with_raster_block(ctx, 8), 32, false),
         (
-            Renderer::with_options(ctx, false, false).with_raster_block(ctx, 8),
+            Renderer::new(ctx).with_raster_blocks(ctx, RasterBlocks::both(8)),
+            31,
+            true,
+        ),
+        (
+            Renderer::new(ctx).with_raster_blocks(ctx, RasterBlocks::both(8)),
+            32,
+            false,
+        ),
+        (
+            Renderer::with_options(ctx, false, false)
+                .with_raster_blocks(ctx, RasterBlocks::both(8)),
             33,
             true,
         ),
@@ -214,7 +225,7 @@ fn backward_in_8x8_blocks_matches_reference() {
         };
         check_with(ctx, &renderer, &[view], seed + 100, depth);
     }
-    let renderer = Renderer::new(ctx).with_raster_block(ctx, 8);
+    let renderer = Renderer::new(ctx).with_raster_blocks(ctx, RasterBlocks::both(8));
     let (cams, sets) = scenes_per_camera(2, (45, 37), 0.1, 2, |_| 50, 70);
     let views = views_of(&cams, &sets, |i| [0.1, 0.3 * i as f32, 0.6]);
     check(ctx, &renderer, &views, 41);
@@ -233,7 +244,18 @@ fn backward_in_chunks_matches_reference() {
         (Renderer::new(ctx), 2, 51, true),
         (Renderer::new(ctx), 5, 52, false),
         (Renderer::with_options(ctx, false, false), 3, 53, true),
-        (Renderer::new(ctx).with_raster_block(ctx, 8), 4, 54, true),
+        (
+            Renderer::new(ctx).with_raster_blocks(ctx, RasterBlocks::both(8)),
+            4,
+            54,
+            true,
+        ),
+        (
+            Renderer::new(ctx).with_raster_blocks(ctx, RasterBlocks::both(16)),
+            3,
+            58,
+            false,
+        ),
     ] {
         let renderer = renderer.with_raster_split(RasterSplit::Fixed(split));
         let (g, cam) = one_image(3, 60, seed);
@@ -267,7 +289,7 @@ fn backward_in_chunks_matches_reference() {
     };
     assert_eq!(check(ctx, &renderer, &[view], 156), 4);
     let renderer = Renderer::new(ctx)
-        .with_raster_block(ctx, 8)
+        .with_raster_blocks(ctx, RasterBlocks::both(8))
         .with_raster_split(RasterSplit::Fixed(5));
     let (cams, sets) = scenes_per_camera(2, (45, 37), 0.1, 2, |_| 80, 57);
     let views = views_of(&cams, &sets, |i| [0.1, 0.3 * i as f32, 0.6]);
@@ -285,7 +307,7 @@ fn backward_in_long_chunks_matches_reference() {
         (Renderer::new(ctx), 2, 4000, -3.0, 61),
         (Renderer::new(ctx), 3, 4000, 0.0, 62),
         (
-            Renderer::new(ctx).with_raster_block(ctx, 8),
+            Renderer::new(ctx).with_raster_blocks(ctx, RasterBlocks::both(8)),
             2,
             3000,
             -2.0,

@@ -3,7 +3,7 @@
 mod common;
 
 use cocog_engine::reference::{Gaussians64, render};
-use cocog_engine::{Batch, Camera, GaussianParams, RasterSplit, Renderer, View};
+use cocog_engine::{Batch, Camera, GaussianParams, RasterBlocks, RasterSplit, Renderer, View};
 use common::{gpu, random_scene, scenes_per_camera, test_camera, views_of};
 
 /// Renders `views` in one GPU batch and compares every image with the reference.
@@ -13,13 +13,13 @@ fn compare(views: &[View<'_>]) {
 
 /// `compare`, where more than `min_visible` of each view's Gaussians must be visible.
 fn compare_with(views: &[View<'_>], min_visible: f64) {
-    compare_in_blocks(views, min_visible, 16);
+    compare_in_blocks(views, min_visible, RasterBlocks::DEFAULT);
 }
 
-/// `compare_with`, compositing in workgroups of `block`² pixels.
-fn compare_in_blocks(views: &[View<'_>], min_visible: f64, block: u32) {
+/// `compare_with`, compositing in workgroups of these blocks.
+fn compare_in_blocks(views: &[View<'_>], min_visible: f64, blocks: RasterBlocks) {
     let Some(ctx) = gpu() else { return };
-    let renderer = Renderer::new(ctx).with_raster_block(ctx, block);
+    let renderer = Renderer::new(ctx).with_raster_blocks(ctx, blocks);
     let batch = Batch::from_views(ctx, views).unwrap();
     let state = renderer.forward(ctx, &batch).unwrap();
     assert!(state.num_intersections > 0);
@@ -204,26 +204,29 @@ fn tile_culling_drops_intersections_without_changing_pixels() {
     compare(&[view]);
 }
 
-/// Compositing in 8×8 blocks of a tile (`with_raster_block`): a batch of frames whose sides
-/// are multiples of neither 8 nor 16, then a dense scene where blocks stop early.
+/// Compositing in whole 16×16 tiles and in 8×8 blocks of a tile (the default forward's):
+/// a batch of frames whose sides are multiples of neither 8 nor 16, then a dense scene where
+/// blocks stop early.
 #[test]
-fn eight_by_eight_blocks_match_reference() {
-    let (cams, sets) = scenes_per_camera(2, (45, 37), 0.1, 2, |_| 60, 80);
-    compare_in_blocks(
-        &views_of(&cams, &sets, |i| [0.2, 0.5, 0.3 * i as f32]),
-        0.5,
-        8,
-    );
-    let (g, cam) = dense_scene();
-    compare_in_blocks(
-        &[View {
-            gaussians: &g,
-            camera: &cam,
-            background: [1.0, 1.0, 1.0],
-        }],
-        0.5,
-        8,
-    );
+fn tiles_and_blocks_match_reference() {
+    for side in [16, 8] {
+        let (cams, sets) = scenes_per_camera(2, (45, 37), 0.1, 2, |_| 60, 80);
+        compare_in_blocks(
+            &views_of(&cams, &sets, |i| [0.2, 0.5, 0.3 * i as f32]),
+            0.5,
+            RasterBlocks::both(side),
+        );
+        let (g, cam) = dense_scene();
+        compare_in_blocks(
+            &[View {
+                gaussians: &g,
+                camera: &cam,
+                background: [1.0, 1.0, 1.0],
+            }],
+            0.5,
+            RasterBlocks::both(side),
+        );
+    }
 }
 
 /// Splitting the backward's tile lists (`with_raster_split`) only makes the forward record

@@ -73,9 +73,9 @@ pub struct Renderer {
     rasterize_backward: [OnceLock<Kernel>; 2],
     /// Overrides the device's binding limit (tests of the banded paths at small sizes).
     binding_limit: Option<u64>,
-    /// The compositing forward's and backward's workgroup: a `raster_block`² block of a 16×16
-    /// tile.
-    raster_block: u32,
+    /// The compositing forward's and backward's workgroups: blocks of a 16×16 tile, 8 or 16
+    /// pixels a side.
+    blocks: RasterBlocks,
     /// How many chunks the compositing backward splits each tile's list into.
     raster_split: RasterSplit,
 }
@@ -146,13 +146,69 @@ fn groups(n: u32) -> u32 {
     n.div_ceil(256)
 }
 
-/// `COCOG_RASTER_BLOCK=8` runs the compositing forward and backward in 8×8 blocks of a tile
-/// (experimental: which is faster depends on the GPU and the frame's tile count); anything else,
-/// in 16×16 tiles.
-pub fn raster_block_from_env() -> u32 {
-    match std::env::var("COCOG_RASTER_BLOCK").as_deref() {
-        Ok("8") => 8,
-        _ => 16,
+/// The side of the pixel block one workgroup of the compositing forward and of its backward
+/// composites: 16 (a tile) or 8 (a quarter of one, each walking the tile's whole list).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RasterBlocks {
+    pub forward: u32,
+    pub backward: u32,
+}
+
+impl RasterBlocks {
+    /// Forward in 8×8 blocks, backward in 16×16 tiles. On an H200 the forward's 8×8 blocks took
+    /// 0.685 ms against 0.846 at 100×75 and 0.130 against 0.152 at 400×300 (dev-table, 57k
+    /// Gaussians): a block stops walking once its own 64 pixels are opaque, not the tile's 256.
+    /// The backward's workgroups come from splitting lists (`RasterSplit`) instead, which beat
+    /// 8×8 blocks there (0.290 against 0.421 ms at 400×300). A pixel's result is the same either
+    /// way, and the backward reads only per-pixel state, so the two sides need not agree.
+    pub const DEFAULT: Self = Self {
+        forward: 8,
+        backward: 16,
+    };
+
+    /// Both sides in blocks of `side` (8, else 16).
+    pub fn both(side: u32) -> Self {
+        let side = if side == 8 { 8 } else { 16 };
+        Self {
+            forward: side,
+            backward: side,
+        }
+    }
+
+    /// `COCOG_RASTER_BLOCK=8` or `16` puts both sides in blocks of that side (to time them
+    /// against the default); unset, `DEFAULT`; anything else is said on stderr and ignored.
+    pub fn from_env() -> Self {
+        match std::env::var("COCOG_RASTER_BLOCK").as_deref() {
+            Err(_) | Ok("") => Self::DEFAULT,
+            Ok("8") => Self::both(8),
+            Ok("16") => Self::both(16),
+            Ok(other) => {
+                eprintln!(
+                    "COCOG_RASTER_BLOCK={other}: expected 8 or 16; the default (forward 8, backward 16) stays"
+                );
+                Self::DEFAULT
+            }
+        }
+    }
+
+    /// Said by `cocog bench`.
+    pub fn describe(self) -> String {
+        let side = |s: u32| {
+            if s == 8 {
+                "8×8 blocks of each 16×16 tile"
+            } else {
+                "16×16 tiles"
+            }
+        };
+        if self.forward == self.backward {
+            side(self.forward).to_owned()
+        } else {
+            format!(
+                "forward in {}, backward in {}",
+                side(self.forward),
+                side(self.backward)
+            )
+        }
     }
 }
 
@@ -186,7 +242,7 @@ impl Renderer {
             "tiles",
             &format!("{tile_test}\n{}", include_str!("tiles.wgsl")),
         );
-        let block = raster_block_from_env();
+        let blocks = RasterBlocks::from_env();
         let atomics = if native_atomics && ctx.float_atomics {
             include_str!("atomic_native.wgsl")
         } else {
@@ -213,12 +269,12 @@ impl Renderer {
             emit_keys: Kernel::new(ctx, &tiles, "emit_keys"),
             tile_ranges: Kernel::new(ctx, &tiles, "tile_ranges"),
             check_capacity: Kernel::new(ctx, &tiles, "check_capacity"),
-            rasterize: Self::rasterize_kernel(ctx, block, false),
+            rasterize: Self::rasterize_kernel(ctx, blocks.forward, false),
             rasterize_split: OnceLock::new(),
             rasterize_backward_src,
             rasterize_backward: Default::default(),
             binding_limit: None,
-            raster_block: block,
+            blocks,
             raster_split: raster_split_for(ctx),
         }
     }
@@ -273,7 +329,7 @@ impl Renderer {
     /// (16 bytes per pixel and chunk) and the grid's x (blocks in a row × chunks) allow.
     fn splits(&self, ctx: &GpuContext, batch: &Batch) -> u32 {
         let (tiles_x, tiles_y) = batch.tiles();
-        let per_tile = 16 / self.raster_block;
+        let per_tile = 16 / self.blocks.backward;
         let wanted = match self.raster_split {
             RasterSplit::Fixed(n) => n,
             RasterSplit::Auto => {
@@ -490,10 +546,10 @@ impl Renderer {
             min_chunk: self.raster_split.min_chunk(),
         };
         let raster = rec.uniform(&Self::raster_params(batch, splits, state.min_chunk));
-        let per_tile = 16 / self.raster_block;
+        let per_tile = 16 / self.blocks.forward;
         let rasterize = if splits > 1 {
             self.rasterize_split
-                .get_or_init(|| Self::rasterize_kernel(ctx, self.raster_block, true))
+                .get_or_init(|| Self::rasterize_kernel(ctx, self.blocks.forward, true))
         } else {
             &self.rasterize
         };
@@ -517,15 +573,27 @@ impl Renderer {
         state
     }
 
-    /// The compositing forward and backward in workgroups of `side`² pixels (16: a tile; 8: a
-    /// quarter of one), where the default (`COCOG_RASTER_BLOCK`, else 16) is not wanted. Other
-    /// sides are taken as 16.
-    pub fn with_raster_block(mut self, ctx: &GpuContext, side: u32) -> Self {
-        self.raster_block = if side == 8 { 8 } else { 16 };
-        self.rasterize = Self::rasterize_kernel(ctx, self.raster_block, false);
+    /// The compositing forward and backward in workgroups of these blocks, where the default
+    /// (`RasterBlocks::from_env`) is not wanted.
+    pub fn with_raster_blocks(mut self, ctx: &GpuContext, blocks: RasterBlocks) -> Self {
+        self.blocks = RasterBlocks {
+            forward: RasterBlocks::both(blocks.forward).forward,
+            backward: RasterBlocks::both(blocks.backward).backward,
+        };
+        self.rasterize = Self::rasterize_kernel(ctx, self.blocks.forward, false);
         self.rasterize_split = OnceLock::new();
         self.rasterize_backward = Default::default();
         self
+    }
+
+    /// The blocks the compositing forward and backward run in.
+    pub fn blocks(&self) -> RasterBlocks {
+        self.blocks
+    }
+
+    /// How the compositing backward splits tile lists.
+    pub fn raster_split(&self) -> RasterSplit {
+        self.raster_split
     }
 
     /// Splits the compositing backward's tile lists as `split` says, where the default
@@ -546,7 +614,7 @@ impl Renderer {
     /// The compositing backward, with or without the depth channel.
     fn rasterize_backward(&self, ctx: &GpuContext, depth: bool) -> &Kernel {
         self.rasterize_backward[usize::from(depth)].get_or_init(|| {
-            let sub = self.raster_block;
+            let sub = self.blocks.backward;
             let prelude = if depth {
                 "const DEPTH_GRAD: bool = true;\n\
                  @group(0) @binding(8) var<storage, read> v_depth: array<f32>;\n\
@@ -626,7 +694,7 @@ impl Renderer {
         if let Some(v_depth) = v_depth {
             binds.push((8, v_depth));
         }
-        let per_tile = 16 / self.raster_block;
+        let per_tile = 16 / self.blocks.backward;
         self.rasterize_backward(ctx, v_depth.is_some()).dispatch(
             rec,
             &binds,

@@ -431,7 +431,7 @@ fn measure(
         shader_f16: gpu.shader_f16,
         cooperative_matrices: gpu.cooperative_matrix_shapes(),
         cooperative_f16: gpu.cooperative.is_some(),
-        compositing: compositing_setting(gpu),
+        compositing: compositing_setting(trainer.renderer()),
         coop_block: cocog_engine::Gemm::cooperative_block(gpu)
             .map(|b| b.name().unwrap_or("unnamed").to_owned()),
         width,
@@ -589,16 +589,18 @@ fn yes_no(b: bool) -> &'static str {
     if b { "yes" } else { "no" }
 }
 
-/// How the compositing forward and backward run on `gpu`'s adapter, as the environment sets
-/// them.
-fn compositing_setting(gpu: &cocog_engine::GpuContext) -> String {
-    use cocog_engine::splat::{RasterSplit, raster_block_from_env, raster_split_for};
-    let block = if raster_block_from_env() == 8 {
-        "8×8 blocks of each 16×16 tile (COCOG_RASTER_BLOCK=8)"
-    } else {
-        "16×16 tiles"
+/// How the trainer's renderer composites (as the environment and the adapter set it; read
+/// from the renderer, so an invalid switch is warned about once).
+fn compositing_setting(renderer: &cocog_engine::Renderer) -> String {
+    use cocog_engine::splat::RasterSplit;
+    let blocks = renderer.blocks();
+    let block = match std::env::var("COCOG_RASTER_BLOCK") {
+        Ok(side) if blocks != cocog_engine::RasterBlocks::DEFAULT => {
+            format!("{} (COCOG_RASTER_BLOCK={side})", blocks.describe())
+        }
+        _ => blocks.describe(),
     };
-    let split = match raster_split_for(gpu) {
+    let split = match renderer.raster_split() {
         RasterSplit::Fixed(1) => "whole tile lists in the backward".to_owned(),
         RasterSplit::Fixed(n) => {
             format!("the backward walks each tile list in {n} chunks (COCOG_RASTER_SPLIT={n})")

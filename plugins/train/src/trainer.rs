@@ -459,6 +459,11 @@ impl<'c> Trainer<'c> {
         self.batch.as_ref().map_or(0, |b| b.params.sh_degree)
     }
 
+    /// The renderer the steps composite with (its blocks and split, as `cocog bench` reports).
+    pub fn renderer(&self) -> &Renderer {
+        &self.renderer
+    }
+
     pub fn num_gaussians(&self) -> u32 {
         self.batch.as_ref().map_or(0, |b| b.params.num_gaussians)
     }
