@@ -1,19 +1,19 @@
 #!/usr/bin/env bash
 # What a short GPU lease is for, as bounded phases of one command (../shared/notes/gpu-device.md):
 #
-#   bench/gpu-session.sh RESULTS [PHASE...]  (default: step peer-train tests)
+#   bench/gpu-session.sh RESULTS [PHASE...]  (default: tests peer-train step)
 #
 # A 15-minute lease holds the machine's start (about 40 s on 2026-11-27) and about 800 s of
-# calls; a machine left idle for 30 s is gone. The tests phase took about 90 s on 2026-11-27
-# (nn_compositor alone 36 s): give it 120. Measured on an H200 (2026-11-27), before the
-# step phase's raster-block and split-list runs were added (its block layouts are a phase of
-# their own now): step 45 s, peer-synthetic 85 s (65 of them gsplat's CUDA build), tests 55 s (90 s
-# with nn_compositor's later cases),
-# peer-train 250 s with gsplat built (plus four benches of at most 20 s after the peer now;
-# peer-train builds gsplat when peer-synthetic has not). The default phases fit one call of
-# BUDGET=540, peer-train before tests so the phase the call is for starts with room to spare. A second call made at
-# once fits train-split and layouts (`BUDGET=250 ... train-split layouts`); peer-synthetic
-# (#11's 1M-Gaussian figure, met on 2026-11-27) only where the lease has room left.
+# calls; a machine left idle for 30 s is gone. Measured on an H200 (2026-11-27): tests about 90 s
+# (nn_compositor alone 36 s), step 45 s before its raster-block and split-list rows were added
+# (about 105 s now, an estimate), peer-synthetic 85 s (65 of them gsplat's CUDA build),
+# peer-train 250 s with gsplat built (plus five benches of at most 20 s after the peer now).
+# gsplat's build runs in the background during an untimed phase (tests, gates) when a peer phase
+# follows it, so the default order puts tests first; tests stop starting executables when the
+# later phases would no longer fit (each phase's need: need_of). The default phases fit one call
+# of BUDGET=540. A second call made at once fits train-split and layouts (`BUDGET=250 ...
+# train-split layouts`); peer-synthetic (#11's 1M-Gaussian figure, met on 2026-11-27) only where
+# the lease has room left.
 #
 # BUDGET (seconds, default 560) bounds the whole call: a phase that would not fit what is left is
 # skipped and says so in RESULTS/session.txt, and every command's timeout is cut to what is
@@ -66,8 +66,8 @@
 # line again (BUDGET=what is left) to continue the stopped runs from their checkpoints on the
 # still-warm machine; `gates 12-full-shelf` on another lease
 # (the trainings share the GPU; stopped ones continue on the next call with the same line).
-# gsplat's CUDA code builds on its first call on a machine (60–80 s on 16 cores); later calls on
-# the same warm machine reuse it. A phase that finished leaves a marker in WORK, so a second call
+# gsplat's CUDA code builds once per machine (60–80 s on 16 cores; in the background where an
+# untimed phase comes first); later calls on the same warm machine reuse it. A phase that finished leaves a marker in WORK, so a second call
 # on the same machine goes on with the phases the first did not finish. RESULTS gets session.txt (every
 # phase's output), tests.log, gates.tgz and the peers' result files.
 set -uo pipefail
@@ -76,7 +76,7 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 results="${1:?usage: bench/gpu-session.sh RESULTS [PHASE...]}"
 shift
 phases=("$@")
-((${#phases[@]})) || phases=(step peer-train tests)
+((${#phases[@]})) || phases=(tests peer-train step)
 budget="${BUDGET:-560}"
 dev="${DEV:-$root/.device}"
 work="${WORK:-/tmp/gpu-session}"
@@ -123,13 +123,35 @@ for s in sharp-dev defocus-dev/dev-table; do
     [[ -f "$n/scene.json" ]] || "$cocog" ingest colmap "$dev/bench/$s" -o "$n" -q --force
 done
 
-gsplat_ready() {
+gsplat_installed() {
     if [[ ! -d /tmp/site/gsplat ]]; then
         python3 -m pip install -q --no-index --no-deps --target /tmp/site \
             "$dev"/gsplat-1.5.3-py3-none-any.whl >>"$log" 2>&1 || return 1
     fi
-    export PYTHONPATH=/tmp/site TORCH_CUDA_ARCH_LIST="${TORCH_CUDA_ARCH_LIST:-9.0}" \
-        MAX_JOBS="${MAX_JOBS:-16}"
+    export PYTHONPATH=/tmp/site TORCH_CUDA_ARCH_LIST="${TORCH_CUDA_ARCH_LIST:-9.0}"
+}
+
+# gsplat compiles its CUDA code on first import (60–80 s of CPU, the GPU idle). Where a peer
+# phase comes after an untimed one (tests, gates), the build starts in the background as that
+# phase begins, niced and on 12 of the 16 cores, so it overlaps it instead of adding to the
+# lease (never a timed phase: it would share the CPU with what is timed). Every gsplat run waits
+# for it first: gsplat deletes a half-built extension when a second process imports it.
+gsplat_build_pid=
+start_gsplat_build() {
+    [[ -z "$gsplat_build_pid" && ! -f "$work/gsplat-built" ]] && gsplat_installed || return 0
+    (cd /tmp && MAX_JOBS=12 nice -n 19 timeout 400 python3 -c "from gsplat.cuda._backend import _C" \
+        >"$results/gsplat-build.log" 2>&1 && touch "$work/gsplat-built") &
+    gsplat_build_pid=$!
+    echo "-- gsplat's CUDA build started in the background" >>"$log"
+}
+gsplat_ready() {
+    if [[ "$gsplat_build_pid" =~ ^[0-9]+$ ]]; then
+        local t0=$SECONDS
+        wait "$gsplat_build_pid"
+        echo "-- waited $((SECONDS - t0)) s for gsplat's background build" >>"$log"
+        gsplat_build_pid=done
+    fi
+    gsplat_installed && export MAX_JOBS="${MAX_JOBS:-16}"
 }
 
 # The Gaussians step and layouts bench on: a 5000-iteration 3dgs run on dev-table at 100×75,
@@ -246,6 +268,8 @@ train_sharp_dev() {
 
 phase_peer_train() {
     local out="$work/peer-cocog-sharp-dev"
+    # cocog's side is timed for #11: not beside the build.
+    gsplat_ready
     train_sharp_dev "$out"
     gsplat_ready && bounded 600 python3 "$root/bench/peer_gsplat.py" train "$work/in-sharp-dev" \
         --out "$results/gsplat-sharp-dev" --iterations 30000 >>"$log" 2>&1
@@ -280,12 +304,19 @@ phase_tests() {
     for t in "$work"/tests/*; do
         # TESTS="gpu_coop_gemm nn_compositor" runs those alone (default: every one).
         [[ -z "${TESTS:-}" || " $TESTS " == *" $(basename "$t") "* ]] || continue
+        # The phases after this one keep what they need.
+        if (($(left) - 30 < tests_leave)); then
+            echo "== $(basename "$t") and the rest not run: $(left) s left, $tests_leave kept for the later phases"
+            break
+        fi
         echo "== $(basename "$t")"
         # The cooperative-matrix product's own test enables the experimental feature; no
         # other test does, so they test what training runs.
         local coop=0
         [[ $(basename "$t") == gpu_coop_gemm ]] && coop=1
-        CI=true COCOG_COOPERATIVE_MATRIX=$coop bounded 150 "$t" --test-threads 2 --nocapture 2>&1 |
+        local most=$(($(left) - tests_leave - 10))
+        ((most > 150)) && most=150
+        CI=true COCOG_COOPERATIVE_MATRIX=$coop bounded "$most" "$t" --test-threads 2 --nocapture 2>&1 |
             grep -E "^test |test result|panicked|FAILED|assert|skipped"
     done >"$results/tests.log" 2>&1
 }
@@ -299,18 +330,47 @@ phase_gates() {
     cp "$work/g/summary.tsv" "$results/" 2>/dev/null
 }
 
+# Seconds phase $1 needs to be started (what it took on an H200, with a margin).
+need_of() {
+    case "$1" in
+        step | train-split | idle-bench | tests) echo 120 ;;
+        layouts) echo 130 ;;
+        peer-synthetic) echo 165 ;;
+        # gsplat's build (65 s) aside once it is under way or done.
+        peer-train) [[ -n "$gsplat_build_pid" || -f "$work/gsplat-built" ]] && echo 310 || echo 375 ;;
+        *) echo 0 ;;
+    esac
+}
+# What the phases from index $1 on need, those this machine finished aside.
+needs_after() {
+    local j sum=0
+    for ((j = $1; j < ${#phases[@]}; j++)); do
+        [[ -f "$work/done-${phases[j]}" ]] || sum=$((sum + $(need_of "${phases[j]}")))
+    done
+    echo "$sum"
+}
+tests_leave=0
+
+# Whether a peer phase (which runs gsplat) comes after phase index $1.
+peer_after() {
+    local j
+    for ((j = $1; j < ${#phases[@]}; j++)); do
+        [[ "${phases[j]}" == peer-* && ! -f "$work/done-${phases[j]}" ]] && return 0
+    done
+    return 1
+}
+
 i=0
 while ((i < ${#phases[@]})); do
     p="${phases[i]}"
     i=$((i + 1))
+    [[ "$p" == tests || "$p" == gates ]] && peer_after "$i" && start_gsplat_build
     case "$p" in
-        step) run_phase step 120 ;;
-        layouts) run_phase layouts 130 ;;
-        peer-synthetic) run_phase peer-synthetic 165 ;;
-        peer-train) run_phase peer-train 375 ;;
-        train-split) run_phase train-split 120 ;;
-        idle-bench) run_phase idle-bench 120 ;;
-        tests) run_phase tests 120 ;;
+        step | layouts | peer-synthetic | peer-train | train-split | idle-bench)
+            run_phase "$p" "$(need_of "$p")" ;;
+        tests)
+            tests_leave=$(needs_after "$i")
+            run_phase tests "$((30 + tests_leave))" ;;
         gates)
             sets=()
             while ((i < ${#phases[@]})) && [[ "${phases[i]}" == [0-9]* ]]; do
