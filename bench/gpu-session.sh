@@ -30,8 +30,8 @@
 #                   in f32 (COCOG_NO_F16=1) as well as f16, with the per-kernel split
 #                   (--kernels), and on tensor cores (COCOG_F_CONV=coop, f16 operands,
 #                   experimental), and both steps compositing in 8×8 blocks on both sides
-#                   (COCOG_RASTER_BLOCK=8), in 16×16 tiles on both sides (=16; the default
-#                   forward is in 8×8 blocks, the backward in tiles) or with the backward's tile
+#                   (COCOG_RASTER_BLOCK=8), in 16×16 tiles on both sides (=16; by default
+#                   the forward takes 8×8 blocks below 2048 tiles, the backward tiles) or with the backward's tile
 #                   lists whole (COCOG_RASTER_SPLIT=1; a GPU's default splits them); then at
 #                   400×300 on the same Gaussians the 3dgs
 #                   step (each of those settings, and 4 chunks) and the cocog step (what a step
@@ -186,8 +186,8 @@ phase_step() {
         [[ $m == *-winograd ]] && vars=(COCOG_F_CONV=winograd)
         [[ $m == *-coop ]] && vars=(COCOG_F_CONV=coop COCOG_COOPERATIVE_MATRIX=1)
         [[ $m == *-f32 ]] && vars+=(COCOG_NO_F16=1)
-        # Compositing in 8×8 blocks of a tile, the backward too (the default forward's), or in
-        # whole 16×16 tiles, the forward too (the default backward's).
+        # Compositing in 8×8 blocks of a tile, the backward too (the default forward's on
+        # frames of few tiles), or in whole 16×16 tiles, the forward too (the default backward's).
         [[ $m == *-b8 ]] && vars+=(COCOG_RASTER_BLOCK=8)
         [[ $m == *-b16 ]] && vars+=(COCOG_RASTER_BLOCK=16)
         # The compositing backward walking each tile's list whole (a GPU's default splits them).
@@ -252,7 +252,8 @@ phase_peer_synthetic() {
 }
 
 # The compositing settings the benches compare: whole tile lists in the backward, 8×8 blocks
-# on both sides, 16×16 tiles on both sides (the forward's default is 8×8 blocks), and tile lists
+# on both sides, 16×16 tiles on both sides (by default the forward takes 8×8 blocks below 2048
+# tiles), and tile lists
 # split (as many chunks as RasterSplit::Auto picks, a GPU's default, and 4).
 raster_settings=("COCOG_RASTER_SPLIT=1" "COCOG_RASTER_BLOCK=8" "COCOG_RASTER_BLOCK=16"
     "COCOG_RASTER_SPLIT=auto" "COCOG_RASTER_SPLIT=4")

@@ -201,18 +201,17 @@ fn backward_in_8x8_blocks_matches_reference() {
     let Some(ctx) = gpu() else { return };
     for (renderer, seed, depth) in [
         (
-            Renderer::new(ctx).with_raster_blocks(ctx, RasterBlocks::both(8)),
+            Renderer::new(ctx).with_raster_blocks(RasterBlocks::both(8)),
             31,
             true,
         ),
         (
-            Renderer::new(ctx).with_raster_blocks(ctx, RasterBlocks::both(8)),
+            Renderer::new(ctx).with_raster_blocks(RasterBlocks::both(8)),
             32,
             false,
         ),
         (
-            Renderer::with_options(ctx, false, false)
-                .with_raster_blocks(ctx, RasterBlocks::both(8)),
+            Renderer::with_options(ctx, false, false).with_raster_blocks(RasterBlocks::both(8)),
             33,
             true,
         ),
@@ -225,7 +224,7 @@ fn backward_in_8x8_blocks_matches_reference() {
         };
         check_with(ctx, &renderer, &[view], seed + 100, depth);
     }
-    let renderer = Renderer::new(ctx).with_raster_blocks(ctx, RasterBlocks::both(8));
+    let renderer = Renderer::new(ctx).with_raster_blocks(RasterBlocks::both(8));
     let (cams, sets) = scenes_per_camera(2, (45, 37), 0.1, 2, |_| 50, 70);
     let views = views_of(&cams, &sets, |i| [0.1, 0.3 * i as f32, 0.6]);
     check(ctx, &renderer, &views, 41);
@@ -245,13 +244,13 @@ fn backward_in_chunks_matches_reference() {
         (Renderer::new(ctx), 5, 52, false),
         (Renderer::with_options(ctx, false, false), 3, 53, true),
         (
-            Renderer::new(ctx).with_raster_blocks(ctx, RasterBlocks::both(8)),
+            Renderer::new(ctx).with_raster_blocks(RasterBlocks::both(8)),
             4,
             54,
             true,
         ),
         (
-            Renderer::new(ctx).with_raster_blocks(ctx, RasterBlocks::both(16)),
+            Renderer::new(ctx).with_raster_blocks(RasterBlocks::both(16)),
             3,
             58,
             false,
@@ -289,7 +288,7 @@ fn backward_in_chunks_matches_reference() {
     };
     assert_eq!(check(ctx, &renderer, &[view], 156), 4);
     let renderer = Renderer::new(ctx)
-        .with_raster_blocks(ctx, RasterBlocks::both(8))
+        .with_raster_blocks(RasterBlocks::both(8))
         .with_raster_split(RasterSplit::Fixed(5));
     let (cams, sets) = scenes_per_camera(2, (45, 37), 0.1, 2, |_| 80, 57);
     let views = views_of(&cams, &sets, |i| [0.1, 0.3 * i as f32, 0.6]);
@@ -307,7 +306,7 @@ fn backward_in_long_chunks_matches_reference() {
         (Renderer::new(ctx), 2, 4000, -3.0, 61),
         (Renderer::new(ctx), 3, 4000, 0.0, 62),
         (
-            Renderer::new(ctx).with_raster_blocks(ctx, RasterBlocks::both(8)),
+            Renderer::new(ctx).with_raster_blocks(RasterBlocks::both(8)),
             2,
             3000,
             -2.0,

@@ -19,7 +19,7 @@ fn compare_with(views: &[View<'_>], min_visible: f64) {
 /// `compare_with`, compositing in workgroups of these blocks.
 fn compare_in_blocks(views: &[View<'_>], min_visible: f64, blocks: RasterBlocks) {
     let Some(ctx) = gpu() else { return };
-    let renderer = Renderer::new(ctx).with_raster_blocks(ctx, blocks);
+    let renderer = Renderer::new(ctx).with_raster_blocks(blocks);
     let batch = Batch::from_views(ctx, views).unwrap();
     let state = renderer.forward(ctx, &batch).unwrap();
     assert!(state.num_intersections > 0);

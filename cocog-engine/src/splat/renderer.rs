@@ -63,10 +63,10 @@ pub struct Renderer {
     emit_keys: Kernel,
     tile_ranges: Kernel,
     check_capacity: Kernel,
-    rasterize: Kernel,
-    /// The compositing forward that also records chunk state for a split backward, made on
-    /// first use: unsplit, the forward's inner loop carries no boundary test.
-    rasterize_split: OnceLock<Kernel>,
+    /// The compositing forward, made on first use: `[side 8][split]`, where a split one also
+    /// records chunk state for a split backward (unsplit, the inner loop carries no boundary
+    /// test).
+    rasterize: [[OnceLock<Kernel>; 2]; 2],
     /// The compositing backward's source and its two builds, made on first use: with the depth
     /// channel (`[1]`) and without it (`[0]`).
     rasterize_backward_src: String,
@@ -147,7 +147,8 @@ fn groups(n: u32) -> u32 {
 }
 
 /// The side of the pixel block one workgroup of the compositing forward and of its backward
-/// composites: 16 (a tile) or 8 (a quarter of one, each walking the tile's whole list).
+/// composites: 16 (a tile) or 8 (a quarter of one, each walking the tile's whole list); for the
+/// forward also `AUTO`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct RasterBlocks {
     pub forward: u32,
@@ -155,16 +156,36 @@ pub struct RasterBlocks {
 }
 
 impl RasterBlocks {
-    /// Forward in 8×8 blocks, backward in 16×16 tiles. On an H200 the forward's 8×8 blocks took
-    /// 0.685 ms against 0.846 at 100×75 and 0.130 against 0.152 at 400×300 (dev-table, 57k
-    /// Gaussians): a block stops walking once its own 64 pixels are opaque, not the tile's 256.
-    /// The backward's workgroups come from splitting lists (`RasterSplit`) instead, which beat
-    /// 8×8 blocks there (0.290 against 0.421 ms at 400×300). A pixel's result is the same either
-    /// way, and the backward reads only per-pixel state, so the two sides need not agree.
+    /// The forward's side chosen per pass: 8 where a batch has fewer than `SPLIT_TARGET` tiles,
+    /// else 16.
+    pub const AUTO: u32 = 0;
+
+    /// Forward in 8×8 blocks on frames of few tiles, backward in 16×16 tiles. On an H200 the
+    /// forward's 8×8 blocks took 0.685 ms against 0.846 at 100×75 (35 tiles) and 0.130 against
+    /// 0.152 at 400×300 (475 tiles; dev-table, 57k Gaussians), and the cocog step's forward
+    /// (six renders at 100×75) 0.745 against 0.910: with fewer tiles than the GPU has room for
+    /// workgroups, four blocks per tile fill it, and a block stops walking once its own 64
+    /// pixels are opaque, not the tile's 256. Past that count every block walks its tile's list
+    /// again for nothing (not measured there), so larger batches keep whole tiles. The
+    /// backward's workgroups come from splitting lists (`RasterSplit`), which beat 8×8 blocks
+    /// (0.290 against 0.421 ms at 400×300). A pixel's result is the same either way, and the
+    /// backward reads only per-pixel state, so the two sides need not agree.
     pub const DEFAULT: Self = Self {
-        forward: 8,
+        forward: Self::AUTO,
         backward: 16,
     };
+
+    /// The forward's side for a batch of `images` frames of `tiles` (x, y) tiles.
+    pub fn forward_side(self, tiles: (u32, u32), images: u32) -> u32 {
+        if self.forward != Self::AUTO {
+            return self.forward;
+        }
+        if u64::from(tiles.0) * u64::from(tiles.1) * u64::from(images) < u64::from(SPLIT_TARGET) {
+            8
+        } else {
+            16
+        }
+    }
 
     /// Both sides in blocks of `side` (8, else 16).
     pub fn both(side: u32) -> Self {
@@ -183,9 +204,7 @@ impl RasterBlocks {
             Ok("8") => Self::both(8),
             Ok("16") => Self::both(16),
             Ok(other) => {
-                eprintln!(
-                    "COCOG_RASTER_BLOCK={other}: expected 8 or 16; the default (forward 8, backward 16) stays"
-                );
+                eprintln!("COCOG_RASTER_BLOCK={other}: expected 8 or 16; the default stays");
                 Self::DEFAULT
             }
         }
@@ -193,15 +212,15 @@ impl RasterBlocks {
 
     /// Said by `cocog bench`.
     pub fn describe(self) -> String {
-        let side = |s: u32| {
-            if s == 8 {
-                "8×8 blocks of each 16×16 tile"
-            } else {
-                "16×16 tiles"
-            }
+        let side = |s: u32| match s {
+            8 => "8×8 blocks of each 16×16 tile".to_owned(),
+            Self::AUTO => format!(
+                "8×8 blocks of each 16×16 tile below {SPLIT_TARGET} tiles per pass, else 16×16 tiles"
+            ),
+            _ => "16×16 tiles".to_owned(),
         };
         if self.forward == self.backward {
-            side(self.forward).to_owned()
+            side(self.forward)
         } else {
             format!(
                 "forward in {}, backward in {}",
@@ -269,8 +288,7 @@ impl Renderer {
             emit_keys: Kernel::new(ctx, &tiles, "emit_keys"),
             tile_ranges: Kernel::new(ctx, &tiles, "tile_ranges"),
             check_capacity: Kernel::new(ctx, &tiles, "check_capacity"),
-            rasterize: Self::rasterize_kernel(ctx, blocks.forward, false),
-            rasterize_split: OnceLock::new(),
+            rasterize: Default::default(),
             rasterize_backward_src,
             rasterize_backward: Default::default(),
             binding_limit: None,
@@ -546,13 +564,10 @@ impl Renderer {
             min_chunk: self.raster_split.min_chunk(),
         };
         let raster = rec.uniform(&Self::raster_params(batch, splits, state.min_chunk));
-        let per_tile = 16 / self.blocks.forward;
-        let rasterize = if splits > 1 {
-            self.rasterize_split
-                .get_or_init(|| Self::rasterize_kernel(ctx, self.blocks.forward, true))
-        } else {
-            &self.rasterize
-        };
+        let side = self.blocks.forward_side(batch.tiles(), batch.num_images());
+        let per_tile = 16 / side;
+        let rasterize = self.rasterize[usize::from(side == 8)][usize::from(splits > 1)]
+            .get_or_init(|| Self::rasterize_kernel(ctx, side, splits > 1));
         rasterize.dispatch(
             rec,
             &[
@@ -575,13 +590,16 @@ impl Renderer {
 
     /// The compositing forward and backward in workgroups of these blocks, where the default
     /// (`RasterBlocks::from_env`) is not wanted.
-    pub fn with_raster_blocks(mut self, ctx: &GpuContext, blocks: RasterBlocks) -> Self {
+    pub fn with_raster_blocks(mut self, blocks: RasterBlocks) -> Self {
+        let forward = if blocks.forward == RasterBlocks::AUTO {
+            RasterBlocks::AUTO
+        } else {
+            RasterBlocks::both(blocks.forward).forward
+        };
         self.blocks = RasterBlocks {
-            forward: RasterBlocks::both(blocks.forward).forward,
+            forward,
             backward: RasterBlocks::both(blocks.backward).backward,
         };
-        self.rasterize = Self::rasterize_kernel(ctx, self.blocks.forward, false);
-        self.rasterize_split = OnceLock::new();
         self.rasterize_backward = Default::default();
         self
     }
@@ -727,6 +745,31 @@ impl Renderer {
         Gradients {
             params: grads,
             v_projected: v_proj,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{RasterBlocks, SPLIT_TARGET};
+
+    #[test]
+    fn forward_blocks_follow_the_tile_count() {
+        let auto = RasterBlocks::DEFAULT;
+        // dev-table: 100×75 (7 × 5 tiles), six renders of it, 400×300 (25 × 19).
+        assert_eq!(auto.forward_side((7, 5), 1), 8);
+        assert_eq!(auto.forward_side((7, 5), 6), 8);
+        assert_eq!(auto.forward_side((25, 19), 1), 8);
+        // The cocog step's six renders at 400×300, and a 1080p frame: whole tiles.
+        assert_eq!(auto.forward_side((25, 19), 6), 16);
+        assert_eq!(auto.forward_side((120, 68), 1), 16);
+        assert_eq!(auto.forward_side((SPLIT_TARGET, 1), 1), 16);
+        assert_eq!(auto.forward_side((SPLIT_TARGET - 1, 1), 1), 8);
+        assert_eq!(auto.backward, 16);
+        for side in [8, 16] {
+            let both = RasterBlocks::both(side);
+            assert_eq!(both.forward_side((7, 5), 1), side);
+            assert_eq!(both.forward_side((120, 68), 1), side);
         }
     }
 }
