@@ -253,8 +253,7 @@ phase_peer_synthetic() {
 
 # The compositing settings the benches compare: whole tile lists in the backward, 8×8 blocks
 # on both sides, 16×16 tiles on both sides (by default the forward takes 8×8 blocks below 2048
-# tiles), and tile lists
-# split (as many chunks as RasterSplit::Auto picks, a GPU's default, and 4).
+# tiles), and tile lists split (as many chunks as RasterSplit::Auto picks, a GPU's default, and 4).
 raster_settings=("COCOG_RASTER_SPLIT=1" "COCOG_RASTER_BLOCK=8" "COCOG_RASTER_BLOCK=16"
     "COCOG_RASTER_SPLIT=auto" "COCOG_RASTER_SPLIT=4")
 
