@@ -115,6 +115,9 @@ run_phase() {
         return
     fi
     section "$1"
+    # Only tests run beside gsplat's background build; what is timed waits for it (its
+    # need counts what the build still has to go).
+    [[ "$1" == tests ]] || wait_gsplat_build "$(need_of "$1" 0)"
     "phase_${1//-/_}" && touch "$work/done-$1"
 }
 
@@ -131,27 +134,55 @@ gsplat_installed() {
     export PYTHONPATH=/tmp/site TORCH_CUDA_ARCH_LIST="${TORCH_CUDA_ARCH_LIST:-9.0}"
 }
 
-# gsplat compiles its CUDA code on first import (60–80 s of CPU, the GPU idle). Where a peer
-# phase comes after an untimed one (tests, gates), the build starts in the background as that
-# phase begins, niced and on 12 of the 16 cores, so it overlaps it instead of adding to the
-# lease (never a timed phase: it would share the CPU with what is timed). Every gsplat run waits
-# for it first: gsplat deletes a half-built extension when a second process imports it.
+# gsplat compiles its CUDA code on first import (60–80 s of CPU, the GPU idle). Where the tests
+# phase runs before a peer phase, the build starts in the background as tests begin, niced and
+# on 12 of the 16 cores, so it overlaps them instead of adding to the lease. Every other phase
+# waits for it first (run_phase): what is timed must not share the CPU with it, and gsplat
+# deletes a half-built extension when a second process imports it. The call does not end with
+# the build running (the EXIT trap stops it), so a later call never finds one half done.
 gsplat_build_pid=
+gsplat_build_started=0
 start_gsplat_build() {
     [[ -z "$gsplat_build_pid" && ! -f "$work/gsplat-built" ]] && gsplat_installed || return 0
-    (cd /tmp && MAX_JOBS=12 nice -n 19 timeout 400 python3 -c "from gsplat.cuda._backend import _C" \
-        >"$results/gsplat-build.log" 2>&1 && touch "$work/gsplat-built") &
+    # exec: $! is timeout's, which passes a TERM on to the compilers (its process group).
+    (cd /tmp && exec env MAX_JOBS=12 nice -n 19 timeout 400 python3 -c \
+        "from gsplat.cuda._backend import _C; assert _C is not None, 'no CUDA toolkit'") \
+        >"$results/gsplat-build.log" 2>&1 </dev/null &
     gsplat_build_pid=$!
+    gsplat_build_started=$SECONDS
     echo "-- gsplat's CUDA build started in the background" >>"$log"
 }
-gsplat_ready() {
+stop_gsplat_build() {
     if [[ "$gsplat_build_pid" =~ ^[0-9]+$ ]]; then
-        local t0=$SECONDS
-        wait "$gsplat_build_pid"
-        echo "-- waited $((SECONDS - t0)) s for gsplat's background build" >>"$log"
+        kill "$gsplat_build_pid" 2>/dev/null
+        wait "$gsplat_build_pid" 2>/dev/null
+        echo "-- gsplat's background build stopped unfinished at the call's end" >>"$log"
+    fi
+}
+trap stop_gsplat_build EXIT
+# Waits for the background build, but stops it where it would leave fewer than $1 seconds.
+wait_gsplat_build() {
+    if [[ "$gsplat_build_pid" =~ ^[0-9]+$ ]]; then
+        local t0=$SECONDS rc=0 keep=${1:-0}
+        while kill -0 "$gsplat_build_pid" 2>/dev/null && (($(left) > keep)); do
+            sleep 1
+        done
+        kill -0 "$gsplat_build_pid" 2>/dev/null && kill "$gsplat_build_pid"
+        wait "$gsplat_build_pid" || rc=$?
+        echo "-- waited $((SECONDS - t0)) s for gsplat's background build (exit $rc)" >>"$log"
+        ((rc == 0)) && touch "$work/gsplat-built"
         gsplat_build_pid=done
     fi
+}
+gsplat_ready() {
+    wait_gsplat_build
     gsplat_installed && export MAX_JOBS="${MAX_JOBS:-16}"
+}
+# After a gsplat run: its first import built the extension where no background build had.
+gsplat_ran() {
+    local rc=$1
+    ((rc == 0)) && touch "$work/gsplat-built"
+    return "$rc"
 }
 
 # The Gaussians step and layouts bench on: a 5000-iteration 3dgs run on dev-table at 100×75,
@@ -249,6 +280,7 @@ phase_peer_synthetic() {
         --warmup 5 --kernels >>"$log" 2>&1
     gsplat_ready && bounded 300 python3 "$root/bench/peer_gsplat.py" workload "$work/workload" \
         --out "$results/gsplat-synthetic.json" --iterations 20 --warmup 5 >>"$log" 2>&1
+    gsplat_ran $?
 }
 
 # The compositing settings the benches compare: whole tile lists in the backward, 8×8 blocks
@@ -268,11 +300,10 @@ train_sharp_dev() {
 
 phase_peer_train() {
     local out="$work/peer-cocog-sharp-dev"
-    # cocog's side is timed for #11: not beside the build.
-    gsplat_ready
     train_sharp_dev "$out"
     gsplat_ready && bounded 600 python3 "$root/bench/peer_gsplat.py" train "$work/in-sharp-dev" \
         --out "$results/gsplat-sharp-dev" --iterations 30000 >>"$log" 2>&1
+    gsplat_ran $?
     rm -f "$results"/gsplat-sharp-dev/renders/*.png
     # After the peer, which the phase is for: the 3dgs step at the run's end in each
     # compositing setting.
@@ -298,27 +329,39 @@ phase_idle_bench() {
         >>"$log" 2>&1
 }
 
+# Executables run here (a later call on the machine runs only the others), and whether the
+# phase stopped short of the rest.
 phase_tests() {
     [[ -d "$work/tests" ]] || { mkdir -p "$work/tests" && tar xJf "$dev/tests.tar.xz" -C "$work"; } ||
         return 1
+    local t name leave most rc cut=0
     for t in "$work"/tests/*; do
+        name=$(basename "$t")
         # TESTS="gpu_coop_gemm nn_compositor" runs those alone (default: every one).
-        [[ -z "${TESTS:-}" || " $TESTS " == *" $(basename "$t") "* ]] || continue
-        # The phases after this one keep what they need.
-        if (($(left) - 30 < tests_leave)); then
-            echo "== $(basename "$t") and the rest not run: $(left) s left, $tests_leave kept for the later phases"
+        [[ -z "${TESTS:-}" || " $TESTS " == *" $name "* ]] || continue
+        [[ -f "$work/tested-$name" ]] && continue
+        # The phases after this one keep what they need (less as gsplat's build gets on).
+        leave=$(needs_after "$tests_next")
+        most=$(($(left) - leave - 10))
+        if ((most < 20)); then
+            echo "== $name and the rest not run: $(left) s left, $leave kept for the later phases"
+            cut=1
             break
         fi
-        echo "== $(basename "$t")"
+        ((most > 150)) && most=150
+        echo "== $name"
         # The cooperative-matrix product's own test enables the experimental feature; no
         # other test does, so they test what training runs.
         local coop=0
-        [[ $(basename "$t") == gpu_coop_gemm ]] && coop=1
-        local most=$(($(left) - tests_leave - 10))
-        ((most > 150)) && most=150
+        [[ $name == gpu_coop_gemm ]] && coop=1
         CI=true COCOG_COOPERATIVE_MATRIX=$coop bounded "$most" "$t" --test-threads 2 --nocapture 2>&1 |
             grep -E "^test |test result|panicked|FAILED|assert|skipped"
-    done >"$results/tests.log" 2>&1
+        rc=${PIPESTATUS[0]}
+        ((rc == 0)) || echo "== $name exited with $rc$( ((rc == 124)) && echo ' (stopped by the budget)')"
+        touch "$work/tested-$name"
+    done >>"$results/tests.log" 2>&1
+    # Stopped short: no done marker, so a later call runs the rest.
+    ((cut == 0))
 }
 
 phase_gates() {
@@ -330,14 +373,17 @@ phase_gates() {
     cp "$work/g/summary.tsv" "$results/" 2>/dev/null
 }
 
-# Seconds phase $1 needs to be started (what it took on an H200, with a margin).
+# Seconds phase $1 needs to be started (what it took on an H200, with a margin), gsplat's build
+# left as $2 seconds where given (0: done).
 need_of() {
     case "$1" in
-        step | train-split | idle-bench | tests) echo 120 ;;
+        train-split | idle-bench | tests) echo 120 ;;
+        step) echo 140 ;;
         layouts) echo 130 ;;
-        peer-synthetic) echo 165 ;;
-        # gsplat's build (65 s) aside once it is under way or done.
-        peer-train) [[ -n "$gsplat_build_pid" || -f "$work/gsplat-built" ]] && echo 310 || echo 375 ;;
+        # Each with gsplat's build (about 70 s) where it is not done: what a background build
+        # still has to go.
+        peer-synthetic) echo $((100 + ${2:-$(build_left)})) ;;
+        peer-train) echo $((310 + ${2:-$(build_left)})) ;;
         *) echo 0 ;;
     esac
 }
@@ -349,7 +395,20 @@ needs_after() {
     done
     echo "$sum"
 }
-tests_leave=0
+tests_next=0
+# Seconds gsplat's build may still take: 0 once built, its estimate less what a background
+# build has run.
+build_left() {
+    local est=70
+    if [[ -f "$work/gsplat-built" ]]; then
+        echo 0
+    elif [[ "$gsplat_build_pid" =~ ^[0-9]+$ ]]; then
+        local r=$((est - (SECONDS - gsplat_build_started)))
+        echo $((r > 0 ? r : 0))
+    else
+        echo "$est"
+    fi
+}
 
 # Whether a peer phase (which runs gsplat) comes after phase index $1.
 peer_after() {
@@ -364,13 +423,18 @@ i=0
 while ((i < ${#phases[@]})); do
     p="${phases[i]}"
     i=$((i + 1))
-    [[ "$p" == tests || "$p" == gates ]] && peer_after "$i" && start_gsplat_build
     case "$p" in
         step | layouts | peer-synthetic | peer-train | train-split | idle-bench)
             run_phase "$p" "$(need_of "$p")" ;;
         tests)
-            tests_leave=$(needs_after "$i")
-            run_phase tests "$((30 + tests_leave))" ;;
+            tests_next=$i
+            # The build overlaps the tests only where they will run and a peer phase follows.
+            if [[ ! -f "$work/done-tests" ]] && peer_after "$i" &&
+                (($(left) >= 30 + $(needs_after "$i")))
+            then
+                start_gsplat_build
+            fi
+            run_phase tests "$((30 + $(needs_after "$i")))" ;;
         gates)
             sets=()
             while ((i < ${#phases[@]})) && [[ "${phases[i]}" == [0-9]* ]]; do
