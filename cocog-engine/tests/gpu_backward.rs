@@ -10,6 +10,16 @@ use cocog_engine::{
 };
 use common::{gpu, random_scene, random_weights, scenes_per_camera, test_camera, views_of};
 
+/// A GPU's default on frames of few tiles, named so that a `COCOG_RASTER_BLOCK` in the
+/// environment does not change what the tests cover: the forward in 8×8 blocks, the backward
+/// in whole tiles, reading the per-pixel state the forward wrote.
+fn mixed(ctx: &GpuContext) -> Renderer {
+    Renderer::new(ctx).with_raster_blocks(RasterBlocks {
+        forward: 8,
+        backward: 16,
+    })
+}
+
 fn group_names(g: &GaussianParams) -> Vec<&'static str> {
     let n = g.len();
     let mut names = vec!["means"; 3 * n];
@@ -240,8 +250,8 @@ fn backward_in_8x8_blocks_matches_reference() {
 fn backward_in_chunks_matches_reference() {
     let Some(ctx) = gpu() else { return };
     for (renderer, split, seed, depth) in [
-        (Renderer::new(ctx), 2, 51, true),
-        (Renderer::new(ctx), 5, 52, false),
+        (mixed(ctx), 2, 51, true),
+        (mixed(ctx), 5, 52, false),
         (Renderer::with_options(ctx, false, false), 3, 53, true),
         (
             Renderer::new(ctx).with_raster_blocks(RasterBlocks::both(8)),
@@ -268,7 +278,6 @@ fn backward_in_chunks_matches_reference() {
             split
         );
     }
-    let renderer = Renderer::new(ctx).with_raster_split(RasterSplit::Fixed(7));
     let (mut g, cam) = one_image(1, 300, 55);
     for o in &mut g.opacity_logits {
         *o += 3.0;
@@ -278,7 +287,13 @@ fn backward_in_chunks_matches_reference() {
         camera: &cam,
         background: [1.0, 1.0, 1.0],
     };
-    assert_eq!(check(ctx, &renderer, &[view], 155), 7);
+    for renderer in [
+        mixed(ctx),
+        Renderer::new(ctx).with_raster_blocks(RasterBlocks::both(16)),
+    ] {
+        let renderer = renderer.with_raster_split(RasterSplit::Fixed(7));
+        assert_eq!(check(ctx, &renderer, &[view], 155), 7);
+    }
     let renderer = Renderer::new(ctx).with_raster_split(RasterSplit::Fixed(4));
     let (g, cam) = one_image(1, 6, 56);
     let view = View {
@@ -303,8 +318,15 @@ fn backward_in_chunks_matches_reference() {
 fn backward_in_long_chunks_matches_reference() {
     let Some(ctx) = gpu() else { return };
     for (renderer, split, n, shift, seed) in [
-        (Renderer::new(ctx), 2, 4000, -3.0, 61),
-        (Renderer::new(ctx), 3, 4000, 0.0, 62),
+        (mixed(ctx), 2, 4000, -3.0, 61),
+        (mixed(ctx), 3, 4000, 0.0, 62),
+        (
+            Renderer::new(ctx).with_raster_blocks(RasterBlocks::both(16)),
+            2,
+            4000,
+            -3.0,
+            66,
+        ),
         (
             Renderer::new(ctx).with_raster_blocks(RasterBlocks::both(8)),
             2,
@@ -313,7 +335,7 @@ fn backward_in_long_chunks_matches_reference() {
             63,
         ),
         (Renderer::with_options(ctx, false, false), 2, 4000, -3.0, 64),
-        (Renderer::new(ctx), 0, 3000, -2.0, 65),
+        (mixed(ctx), 0, 3000, -2.0, 65),
     ] {
         let renderer = renderer.with_raster_split(if split == 0 {
             RasterSplit::Auto

@@ -259,3 +259,60 @@ fn split_lists_leave_the_forward_unchanged() {
         }
     }
 }
+
+/// A pixel's result does not depend on the forward's block side, which the backward relies on
+/// (it reads per-pixel state the forward wrote with another side): 8×8 blocks and whole tiles
+/// give the same pixels bit for bit, with and without a split's chunk state, on a dense scene
+/// whose blocks stop early and on a batch of ragged frames. Then one renderer choosing the side
+/// per pass (`RasterBlocks::AUTO`) renders a small frame in 8×8 blocks and a frame of 2048
+/// tiles in whole tiles, each the same pixels as a renderer fixed to that side.
+#[test]
+fn block_sides_leave_the_pixels_unchanged() {
+    let Some(ctx) = gpu() else { return };
+    let (g, cam) = dense_scene();
+    let dense = [View {
+        gaussians: &g,
+        camera: &cam,
+        background: [1.0, 1.0, 1.0],
+    }];
+    let (cams, sets) = scenes_per_camera(2, (45, 37), 0.1, 2, |_| 60, 80);
+    let batch_views = views_of(&cams, &sets, |i| [0.2, 0.5, 0.3 * i as f32]);
+    let render = |renderer: &Renderer, views: &[View<'_>]| {
+        let batch = Batch::from_views(ctx, views).unwrap();
+        let state = renderer.forward(ctx, &batch).unwrap();
+        state.read_images(ctx, &batch).unwrap()
+    };
+    for views in [&dense[..], &batch_views[..]] {
+        for split in [RasterSplit::Fixed(1), RasterSplit::Fixed(5)] {
+            let with = |side| {
+                Renderer::new(ctx)
+                    .with_raster_blocks(RasterBlocks::both(side))
+                    .with_raster_split(split)
+            };
+            assert!(
+                render(&with(8), views) == render(&with(16), views),
+                "8×8 blocks changed the pixels ({split:?})"
+            );
+        }
+    }
+    let auto = Renderer::new(ctx).with_raster_blocks(RasterBlocks::DEFAULT);
+    let small = test_camera(64, 48, 0.0);
+    let large = test_camera(1024, 512, 0.0);
+    assert_eq!(RasterBlocks::DEFAULT.forward_side((4, 3), 1), 8);
+    assert_eq!(RasterBlocks::DEFAULT.forward_side((64, 32), 1), 16);
+    for (cam, side) in [(&small, 8), (&large, 16), (&small, 8)] {
+        let g = random_scene(40, 1, 9, cam);
+        let view = [View {
+            gaussians: &g,
+            camera: cam,
+            background: [0.1, 0.2, 0.3],
+        }];
+        let fixed = Renderer::new(ctx).with_raster_blocks(RasterBlocks::both(side));
+        assert!(
+            render(&auto, &view) == render(&fixed, &view),
+            "the automatic side changed a {}×{} frame's pixels",
+            cam.width,
+            cam.height
+        );
+    }
+}

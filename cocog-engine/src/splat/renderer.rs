@@ -74,7 +74,7 @@ pub struct Renderer {
     /// Overrides the device's binding limit (tests of the banded paths at small sizes).
     binding_limit: Option<u64>,
     /// The compositing forward's and backward's workgroups: blocks of a 16×16 tile, 8 or 16
-    /// pixels a side.
+    /// pixels a side (the forward's also `RasterBlocks::AUTO`).
     blocks: RasterBlocks,
     /// How many chunks the compositing backward splits each tile's list into.
     raster_split: RasterSplit,
@@ -134,13 +134,20 @@ pub fn raster_split_for(ctx: &GpuContext) -> RasterSplit {
         Ok(n) if (1..=MAX_SPLIT).contains(&n) => RasterSplit::Fixed(n),
         // Said on stderr, as the other experimental switches do, rather than refused.
         _ => {
-            eprintln!(
-                "COCOG_RASTER_SPLIT={value}: expected auto or 1 to {MAX_SPLIT}; the adapter's default stays"
-            );
+            SPLIT_WARNED.call_once(|| {
+                eprintln!(
+                    "COCOG_RASTER_SPLIT={value}: expected auto or 1 to {MAX_SPLIT}; the adapter's default stays"
+                )
+            });
             default
         }
     }
 }
+
+/// Whether an invalid `COCOG_RASTER_SPLIT` or `COCOG_RASTER_BLOCK` was said: once a process,
+/// however many renderers (training, refocusing, bench) read it.
+static SPLIT_WARNED: std::sync::Once = std::sync::Once::new();
+static BLOCK_WARNED: std::sync::Once = std::sync::Once::new();
 
 fn groups(n: u32) -> u32 {
     n.div_ceil(256)
@@ -204,7 +211,9 @@ impl RasterBlocks {
             Ok("8") => Self::both(8),
             Ok("16") => Self::both(16),
             Ok(other) => {
-                eprintln!("COCOG_RASTER_BLOCK={other}: expected 8 or 16; the default stays");
+                BLOCK_WARNED.call_once(|| {
+                    eprintln!("COCOG_RASTER_BLOCK={other}: expected 8 or 16; the default stays")
+                });
                 Self::DEFAULT
             }
         }
@@ -589,7 +598,8 @@ impl Renderer {
     }
 
     /// The compositing forward and backward in workgroups of these blocks, where the default
-    /// (`RasterBlocks::from_env`) is not wanted.
+    /// (`RasterBlocks::from_env`) is not wanted. A side other than 8 is taken as 16, but the
+    /// forward's `AUTO`.
     pub fn with_raster_blocks(mut self, blocks: RasterBlocks) -> Self {
         let forward = if blocks.forward == RasterBlocks::AUTO {
             RasterBlocks::AUTO

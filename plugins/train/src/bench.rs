@@ -431,7 +431,11 @@ fn measure(
         shader_f16: gpu.shader_f16,
         cooperative_matrices: gpu.cooperative_matrix_shapes(),
         cooperative_f16: gpu.cooperative.is_some(),
-        compositing: compositing_setting(trainer.renderer()),
+        compositing: compositing_setting(
+            trainer.renderer(),
+            (width.div_ceil(16), height.div_ceil(16)),
+            opts.coc.as_ref().map_or(1, |c| c.net.copies + 1),
+        ),
         coop_block: cocog_engine::Gemm::cooperative_block(gpu)
             .map(|b| b.name().unwrap_or("unnamed").to_owned()),
         width,
@@ -589,17 +593,25 @@ fn yes_no(b: bool) -> &'static str {
     if b { "yes" } else { "no" }
 }
 
-/// How the trainer's renderer composites (as the environment and the adapter set it; read
-/// from the renderer, so an invalid switch is warned about once).
-fn compositing_setting(renderer: &cocog_engine::Renderer) -> String {
+/// How the trainer's renderer composites (as the environment and the adapter set it), and the
+/// forward's block side in a step's passes of `images` frames of `tiles`.
+fn compositing_setting(
+    renderer: &cocog_engine::Renderer,
+    tiles: (u32, u32),
+    images: u32,
+) -> String {
     use cocog_engine::splat::RasterSplit;
     let blocks = renderer.blocks();
-    let block = match std::env::var("COCOG_RASTER_BLOCK") {
+    let mut block = match std::env::var("COCOG_RASTER_BLOCK") {
         Ok(side) if blocks != cocog_engine::RasterBlocks::DEFAULT => {
             format!("{} (COCOG_RASTER_BLOCK={side})", blocks.describe())
         }
         _ => blocks.describe(),
     };
+    if blocks.forward == cocog_engine::RasterBlocks::AUTO {
+        let side = blocks.forward_side(tiles, images);
+        block += &format!(" (this step's forward: {side}×{side})");
+    }
     let split = match renderer.raster_split() {
         RasterSplit::Fixed(1) => "whole tile lists in the backward".to_owned(),
         RasterSplit::Fixed(n) => {
