@@ -174,6 +174,7 @@ pub struct Compositor {
     /// The one-channel head's forward and weight gradient, direct: a 64-row GEMM tile would
     /// compute 63 rows for nothing.
     conv: Kernel,
+    head_input_grad: Kernel,
     conv_weight_parts: Kernel,
     conv_weight_sum: Kernel,
     norm_stats: Kernel,
@@ -263,6 +264,12 @@ impl Compositor {
                 }
             }),
             conv: Kernel::new(ctx, &conv, "conv_forward"),
+            head_input_grad: Kernel::labelled(
+                ctx,
+                &conv,
+                "head_input_grad",
+                "conv head input grad",
+            ),
             conv_weight_parts: Kernel::labelled(
                 ctx,
                 &conv,
@@ -519,6 +526,29 @@ impl Compositor {
         );
     }
 
+    /// The head's input gradient (the gradient of y2) for renders `size.image0`.. from every
+    /// render's logit gradient, into the chunk's maps.
+    fn head_input_grad(
+        &self,
+        rec: &mut Recorder,
+        layer: ConvLayer,
+        size: MapSize,
+        params: &dyn Bind,
+        v_logits: &dyn Bind,
+        v_in: &dyn Bind,
+    ) {
+        assert!(
+            layer.1 == 1 && layer.2 == 3,
+            "conv.wgsl's input gradient takes F's 3×3 one-channel head, not {layer:?}"
+        );
+        let u = Self::conv_uniform(rec, layer, size);
+        self.head_input_grad.dispatch_1d(
+            rec,
+            &[(0, &u), (1, params), (4, v_logits), (5, v_in)],
+            (size.images * size.width * size.height).div_ceil(256),
+        );
+    }
+
     fn norm_uniform(rec: &mut Recorder, planes: u32, size: u32) -> crate::core::UniformSlot {
         rec.uniform(&NormU {
             planes,
@@ -635,7 +665,7 @@ impl Compositor {
         let g = &self.gemm;
         // head: weights, then the gradient of its input y2.
         self.weight_grads(rec, ws, head, &l2.1, v_logits, v_params, size);
-        self.conv_input_grad(rec, ws, head, size, params, v_logits, v_y);
+        self.head_input_grad(rec, head, size, params, v_logits, v_y);
         self.relu_norm_backward(rec, l2, v_y, v_z, grad_stats, planes, pixels);
         match self.winograd_for(c2, false) {
             Some(w) => w.weight_grad(rec, ws, c2, local, &l1.1, v_z, v_params),

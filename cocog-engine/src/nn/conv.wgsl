@@ -1,5 +1,6 @@
 // Zero-padded stride-1 convolutions for F's one-channel head (its wider layers run as implicit
-// GEMMs, conv_gemm.rs): the forward, one thread per output value, and the weight gradient, a sum
+// GEMMs, conv_gemm.rs): the forward, one thread per output value, the input gradient, one per
+// pixel, and the weight gradient, a sum
 // over every pixel of every image. That sum is split into blocks of pixels (head_weight_grad_part),
 // then each weight's partial sums are added by one workgroup in a fixed order: a thread per
 // weight walking all pixels would leave a GPU with a few hundred threads, each a long chain of
@@ -11,6 +12,7 @@
 @group(0) @binding(2) var<storage, read> input: array<map_t>;
 @group(0) @binding(3) var<storage, read_write> output: array<f32>;
 @group(0) @binding(4) var<storage, read> v_out: array<f32>;
+@group(0) @binding(5) var<storage, read_write> v_in: array<f32>;
 @group(0) @binding(6) var<storage, read_write> v_params: array<f32>;
 
 const NO_BIAS: u32 = 0xffffffffu;
@@ -79,6 +81,54 @@ fn conv_forward(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) n
         s += params[w + 8u] * t22.inside * f32(input[plane + t22.offset]);
     }
     output[t + cv.image0 * hw] = s;
+}
+
+// Logit gradient of image `base` (its first value) at (y, x), 0 in the padding.
+fn logit_grad(base: u32, y: i32, x: i32) -> f32 {
+    let at = tap(y, x);
+    return at.inside * v_out[base + at.offset];
+}
+
+// The head's input gradient, ∂in[c](y, x) = Σ W[c][ky][kx] · ∂logit(y + 1 − ky, x + 1 − kx):
+// one invocation per pixel loads its nine logit gradients once, then writes every channel's
+// (neighbouring invocations on neighbouring addresses). As a GEMM it was a product nine deep.
+// The taps are summed in the GEMM's order: in gpu_learned_mode_past_one_channel_block a
+// first-layer weight gradient of 8e-5, two instance norms below, sat at the edge of its f32
+// budget, and three partial sums of three tipped it over (4e-7 against 1.1e-7).
+@compute @workgroup_size(256)
+fn head_input_grad(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let t = index(wg, nwg, lid);
+    let hw = cv.height * cv.width;
+    if t >= cv.images * hw {
+        return;
+    }
+    let p = t % hw;
+    let x = i32(p % cv.width);
+    let y = i32(p / cv.width);
+    let i = t / hw;
+    let base = (i + cv.image0) * hw;
+    let g00 = logit_grad(base, y + 1, x + 1);
+    let g01 = logit_grad(base, y + 1, x);
+    let g02 = logit_grad(base, y + 1, x - 1);
+    let g10 = logit_grad(base, y, x + 1);
+    let g11 = logit_grad(base, y, x);
+    let g12 = logit_grad(base, y, x - 1);
+    let g20 = logit_grad(base, y - 1, x + 1);
+    let g21 = logit_grad(base, y - 1, x);
+    let g22 = logit_grad(base, y - 1, x - 1);
+    for (var c = 0u; c < cv.cin; c++) {
+        let w = cv.w_off + c * 9u;
+        var s = params[w] * g00;
+        s += params[w + 1u] * g01;
+        s += params[w + 2u] * g02;
+        s += params[w + 3u] * g10;
+        s += params[w + 4u] * g11;
+        s += params[w + 5u] * g12;
+        s += params[w + 6u] * g20;
+        s += params[w + 7u] * g21;
+        s += params[w + 8u] * g22;
+        v_in[(i * cv.cin + c) * hw + p] = s;
+    }
 }
 
 fn weight_count() -> u32 {
