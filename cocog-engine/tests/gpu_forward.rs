@@ -235,15 +235,7 @@ fn tiles_and_blocks_match_reference() {
 #[test]
 fn split_lists_leave_the_forward_unchanged() {
     let Some(ctx) = gpu() else { return };
-    let (g, cam) = dense_scene();
-    let dense = [View {
-        gaussians: &g,
-        camera: &cam,
-        background: [1.0, 1.0, 1.0],
-    }];
-    let (cams, sets) = scenes_per_camera(2, (45, 37), 0.1, 2, |_| 60, 80);
-    let batch_views = views_of(&cams, &sets, |i| [0.2, 0.5, 0.3 * i as f32]);
-    for views in [&dense[..], &batch_views[..]] {
+    on_dense_and_ragged(|views| {
         let batch = Batch::from_views(ctx, views).unwrap();
         let render = |split| {
             let renderer = Renderer::new(ctx).with_raster_split(split);
@@ -257,7 +249,19 @@ fn split_lists_leave_the_forward_unchanged() {
                 "{split:?} changed the forward's pixels"
             );
         }
-    }
+    });
+}
+
+/// Runs `check` on a dense scene whose pixels stop early, then on a batch of ragged frames.
+fn on_dense_and_ragged(check: impl Fn(&[View<'_>])) {
+    let (g, cam) = dense_scene();
+    check(&[View {
+        gaussians: &g,
+        camera: &cam,
+        background: [1.0, 1.0, 1.0],
+    }]);
+    let (cams, sets) = scenes_per_camera(2, (45, 37), 0.1, 2, |_| 60, 80);
+    check(&views_of(&cams, &sets, |i| [0.2, 0.5, 0.3 * i as f32]));
 }
 
 /// A pixel's result does not depend on the forward's block side, which the backward relies on
@@ -269,20 +273,12 @@ fn split_lists_leave_the_forward_unchanged() {
 #[test]
 fn block_sides_leave_the_pixels_unchanged() {
     let Some(ctx) = gpu() else { return };
-    let (g, cam) = dense_scene();
-    let dense = [View {
-        gaussians: &g,
-        camera: &cam,
-        background: [1.0, 1.0, 1.0],
-    }];
-    let (cams, sets) = scenes_per_camera(2, (45, 37), 0.1, 2, |_| 60, 80);
-    let batch_views = views_of(&cams, &sets, |i| [0.2, 0.5, 0.3 * i as f32]);
     let render = |renderer: &Renderer, views: &[View<'_>]| {
         let batch = Batch::from_views(ctx, views).unwrap();
         let state = renderer.forward(ctx, &batch).unwrap();
         state.read_images(ctx, &batch).unwrap()
     };
-    for views in [&dense[..], &batch_views[..]] {
+    on_dense_and_ragged(|views| {
         for split in [RasterSplit::Fixed(1), RasterSplit::Fixed(5)] {
             let with = |side| {
                 Renderer::new(ctx)
@@ -294,7 +290,7 @@ fn block_sides_leave_the_pixels_unchanged() {
                 "8×8 blocks changed the pixels ({split:?})"
             );
         }
-    }
+    });
     let auto = Renderer::new(ctx).with_raster_blocks(RasterBlocks::DEFAULT);
     let small = test_camera(64, 48, 0.0);
     let large = test_camera(1024, 512, 0.0);
