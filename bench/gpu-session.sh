@@ -26,7 +26,8 @@
 #                   Gaussians, then `cocog bench --resume` times a 3dgs step and a cocog step
 #                   (the default variant, F on) on them, the latter with F's convolutions as
 #                   implicit GEMMs (COCOG_F_CONV=gemm), as tiled kernels (COCOG_F_CONV=tiled)
-#                   and with its 3×3 layers by Winograd (the default), and with F's maps
+#                   and with its 3×3 layers by Winograd (the default), that with the first
+#                   layer's forward by its own kernel (COCOG_F_FIRST=direct), and with F's maps
 #                   in f32 (COCOG_NO_F16=1) as well as f16, with the per-kernel split
 #                   (--kernels), and on tensor cores (COCOG_F_CONV=coop, f16 operands,
 #                   experimental), and both steps compositing in 8×8 blocks on both sides
@@ -204,17 +205,19 @@ step_model() {
 
 # `env` without the caller's code-path switches: each bench row sets its own.
 clean_env=(env -u COCOG_F_CONV -u COCOG_NO_F16 -u COCOG_COOPERATIVE_MATRIX -u COCOG_COOP_BLOCK
-    -u COCOG_RASTER_BLOCK -u COCOG_RASTER_SPLIT)
+    -u COCOG_RASTER_BLOCK -u COCOG_RASTER_SPLIT -u COCOG_F_FIRST)
 
 phase_step() {
     local model
     model=$(step_model) || return 1
     local m vars
-    for m in 3dgs cocog cocog-tiled cocog-winograd cocog-f32 cocog-coop 3dgs-b8 cocog-b8 3dgs-b16 cocog-b16 3dgs-whole cocog-whole; do
+    for m in 3dgs cocog cocog-tiled cocog-winograd cocog-direct cocog-f32 cocog-coop 3dgs-b8 cocog-b8 3dgs-b16 cocog-b16 3dgs-whole cocog-whole; do
         echo "-- $m step on the model's Gaussians" >>"$log"
         vars=(COCOG_F_CONV=gemm)  # the rows named cocog-winograd time the default
         [[ $m == *-tiled ]] && vars=(COCOG_F_CONV=tiled)
         [[ $m == *-winograd ]] && vars=(COCOG_F_CONV=winograd)
+        # The default's first layer forward by its own kernel instead of an implicit GEMM.
+        [[ $m == *-direct ]] && vars=(COCOG_F_CONV=winograd COCOG_F_FIRST=direct)
         [[ $m == *-coop ]] && vars=(COCOG_F_CONV=coop COCOG_COOPERATIVE_MATRIX=1)
         [[ $m == *-f32 ]] && vars+=(COCOG_NO_F16=1)
         # Compositing in 8×8 blocks of a tile, the backward too (the default forward's on
@@ -236,19 +239,22 @@ phase_step() {
         bounded 60 "${clean_env[@]}" $c "$cocog" bench "$work/in-dev-table" --downscale 1 \
             --resume "$model" --method 3dgs --iterations 100 --warmup 10 --kernels >>"$log" 2>&1
     done
-    cocog_full_size "$model" gemm:4x4 winograd:4x4 coop:4x4
+    cocog_full_size "$model" gemm:4x4 winograd:4x4 winograd-direct:4x4 coop:4x4
 }
 
 # The cocog step at 400×300 on model $1 with F as each of $2...: gemm:4x4 (the f32 products),
-# winograd:4x4 (its 3×3 layers by Winograd) or coop:LAYOUT (tensor cores in that CoopBlock
-# layout), with the per-kernel split; by $COCOG_FULL_SIZE where set (another build, for an A/B
+# winograd:4x4 (its 3×3 layers by Winograd), winograd-direct:4x4 (and the first layer's forward
+# by its own kernel) or coop:LAYOUT (tensor cores in that CoopBlock layout), with the per-kernel
+# split; by $COCOG_FULL_SIZE where set (another build, for an A/B
 # on one machine).
 cocog_full_size() {
     local model=$1 m
     shift
     for m in "$@"; do
-        echo "-- cocog step at 400×300 on the model's Gaussians, COCOG_F_CONV=${m%%:*}$([[ $m == coop* ]] && echo " block ${m#*:}")" >>"$log"
-        bounded 60 "${clean_env[@]}" COCOG_F_CONV=${m%%:*} COCOG_COOP_BLOCK=${m#*:} \
+        local conv=${m%%:*} first=gemm
+        [[ $conv == *-direct ]] && conv=${conv%-direct} first=direct
+        echo "-- cocog step at 400×300 on the model's Gaussians, COCOG_F_CONV=$conv COCOG_F_FIRST=$first$([[ $m == coop* ]] && echo " block ${m#*:}")" >>"$log"
+        bounded 60 "${clean_env[@]}" COCOG_F_CONV=$conv COCOG_F_FIRST=$first COCOG_COOP_BLOCK=${m#*:} \
             COCOG_COOPERATIVE_MATRIX=$([[ $m == coop* ]] && echo 1 || echo 0) \
             "${COCOG_FULL_SIZE:-$cocog}" bench "$work/in-dev-table" --downscale 1 --resume "$model" \
             --method cocog --iterations 30 --warmup 5 --kernels >>"$log" 2>&1
@@ -378,7 +384,7 @@ phase_gates() {
 need_of() {
     case "$1" in
         train-split | idle-bench | tests) echo 120 ;;
-        step) echo 140 ;;
+        step) echo 150 ;;
         layouts) echo 130 ;;
         # Each with gsplat's build (about 70 s) where it is not done: what a background build
         # still has to go.

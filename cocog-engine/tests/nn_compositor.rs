@@ -147,7 +147,8 @@ fn to_rgba(m: &Maps) -> Vec<f32> {
     out
 }
 
-/// `gpu_case_on` for both ways of running the wide convolutions, with all renders through F
+/// `gpu_case_on` for each way of running the convolutions (the first layer's forward as an
+/// implicit GEMM and, with Winograd, as its own kernel), with all renders through F
 /// at once and in chunks of two (a binding that holds two renders' maps: F's maps of more
 /// renders would outgrow it), storing F's maps in f32 and, where the adapter has it, f16.
 ///
@@ -169,8 +170,14 @@ fn gpu_case(mode: CompositeMode, channels: usize, images: usize, h: usize, w: us
         );
     }
     for precision in precisions {
-        for path in [ConvPath::Gemm, ConvPath::Tiled, ConvPath::Winograd] {
-            let case = (path, precision, mode);
+        let paths = [
+            (ConvPath::Gemm, false),
+            (ConvPath::Tiled, false),
+            (ConvPath::Winograd, false),
+            (ConvPath::Winograd, true),
+        ];
+        for (path, direct) in paths {
+            let case = (path, direct, precision, mode);
             let maps = gpu_case_on(case, None, None, channels, images, h, w, seed);
             gpu_case_on(case, Some(two), maps.as_ref(), channels, images, h, w, seed);
         }
@@ -240,12 +247,28 @@ fn check_stored_f16(got: &Stored, want: &Stored) {
     }
 }
 
+/// Each of the GPU's f32 maps against the exact layer applied to the map before it, per
+/// scalar: within f32 rounding of the sums (a few ulps of the map's largest value and of the
+/// value itself), so a layer's error cannot hide in the composite's tolerance.
+fn check_stored_f32(got: &Stored, want: &Stored) {
+    for (layer, (g, x)) in got.iter().zip(want).enumerate() {
+        let largest = x.data.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        for (j, (&gv, &xv)) in g.data.iter().zip(&x.data).enumerate() {
+            let tol = 1e-6 * xv.abs() + 1e-6 * largest;
+            assert!(
+                (gv - xv).abs() <= tol,
+                "stored map {layer}, value {j}: GPU {gv:e} vs exact {xv:e}"
+            );
+        }
+    }
+}
+
 /// One run, checked against the reference; returns the run's stored maps when it ran
 /// unchunked in learned mode. `given`: an unchunked run's maps, which a chunked f16 run
 /// recomputes.
 #[allow(clippy::too_many_arguments)]
 fn gpu_case_on(
-    (path, precision, mode): (ConvPath, MapPrecision, CompositeMode),
+    (path, direct, precision, mode): (ConvPath, bool, MapPrecision, CompositeMode),
     limit: Option<u64>,
     given: Option<&Stored>,
     channels: usize,
@@ -269,7 +292,8 @@ fn gpu_case_on(
         .collect();
 
     let config = CompositorConfig::with_channels(channels as u32);
-    let mut comp = Compositor::with_options(ctx, config, path, precision);
+    let mut comp =
+        Compositor::with_options(ctx, config, path, precision).with_direct_first_forward(direct);
     if let Some(bytes) = limit {
         comp = comp.with_binding_limit(bytes);
     }
@@ -310,7 +334,12 @@ fn gpu_case_on(
     let (want_blend, want_v_renders, want_v_p, bounds) = match mode {
         CompositeMode::Learned => {
             let t = match precision {
-                MapPrecision::F32 => forward(&layout, &p, &renders),
+                MapPrecision::F32 => {
+                    if let Some(maps) = &stored {
+                        check_stored_f32(maps, &stored_from(&layout, &p, &renders, maps));
+                    }
+                    forward(&layout, &p, &renders)
+                }
                 MapPrecision::F16 => {
                     let maps = given.or(stored.as_ref()).expect("an unchunked run's maps");
                     if given.is_none() {
@@ -332,7 +361,7 @@ fn gpu_case_on(
     let close = |what: &str, got: f32, want: f64, tol: f64| {
         assert!(
             (f64::from(got) - want).abs() <= tol,
-            "{path:?}, {precision:?}, binding {limit:?}: {what}: GPU {got:e} vs reference {want:e}"
+            "{path:?} (direct first forward: {direct}), {precision:?}, binding {limit:?}: {what}: GPU {got:e} vs reference {want:e}"
         );
     };
     for y in 0..h {

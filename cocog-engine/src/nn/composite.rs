@@ -89,8 +89,8 @@ pub enum ConvPath {
     Tiled,
     /// The wide 3×3 layer's forward, input and weight gradients by Winograd's F(2×2, 3×3)
     /// (conv_winograd.rs): 2.25× fewer multiply-adds than the implicit GEMMs; the first
-    /// (5×5) layer's weight gradient by its own kernel (conv_first.wgsl). The default. The
-    /// 5×5 forward and passes summing fewer channels than a slice stay implicit GEMMs.
+    /// (5×5) layer's forward and weight gradient by kernels of their own (conv_first*.wgsl).
+    /// The default. Passes summing fewer channels than a slice stay implicit GEMMs.
     Winograd,
     /// The implicit GEMMs on cooperative matrices (tensor cores) with f16 operands, where the
     /// context enabled them (`COCOG_COOPERATIVE_MATRIX=1`), else `Gemm`. Experimental:
@@ -169,7 +169,7 @@ pub struct Compositor {
     tile: Option<ConvTile>,
     /// Their 3×3 forwards and input gradients by Winograd, with `ConvPath::Winograd`.
     winograd: Option<ConvWinograd>,
-    /// With `ConvPath::Winograd`, the first (5×5, rgb) layer's weight gradient (conv_first.wgsl).
+    /// With `ConvPath::Winograd`, the first (5×5, rgb) layer's forward and weight gradient.
     first: Option<FirstLayer>,
     /// The one-channel head's forward and weight gradient, direct: a 64-row GEMM tile would
     /// compute 63 rows for nothing.
@@ -248,7 +248,22 @@ impl Compositor {
                         include_str!("conv_first.wgsl")
                     ),
                 );
+                let f = with_maps(
+                    "compositor first layer forward",
+                    &format!(
+                        "{}{}",
+                        include_str!("conv_common.wgsl"),
+                        include_str!("conv_first_forward.wgsl")
+                    ),
+                );
                 FirstLayer {
+                    forward: Kernel::labelled(
+                        ctx,
+                        &f,
+                        "first_forward",
+                        "conv first forward (direct)",
+                    ),
+                    direct: FirstLayer::direct_forward(),
                     weight_part: Kernel::labelled(
                         ctx,
                         &m,
@@ -286,6 +301,15 @@ impl Compositor {
             accumulate: AddInto::new(ctx),
             binding_limit: None,
         }
+    }
+
+    /// With `ConvPath::Winograd`, whether the first layer's forward runs as its own direct
+    /// kernel (`true`) or as an implicit GEMM; `COCOG_F_FIRST` picks it otherwise.
+    pub fn with_direct_first_forward(mut self, direct: bool) -> Self {
+        if let Some(first) = &mut self.first {
+            first.direct = direct;
+        }
+        self
     }
 
     pub fn precision(&self) -> MapPrecision {
@@ -470,6 +494,9 @@ impl Compositor {
     ) {
         if let Some(w) = self.winograd_for(layer, false).filter(|_| !rgba) {
             return w.forward(rec, ws, layer, size, params, input, output);
+        }
+        if let Some(first) = self.first.as_ref().filter(|f| rgba && f.direct) {
+            return first.forward(rec, layer, size, params, input, output);
         }
         match &self.tile {
             Some(t) => t.forward(rec, layer, size, params, input, output, rgba),
@@ -746,16 +773,69 @@ impl Compositor {
     }
 }
 
-/// F's first layer's (5×5, rgb → C) weight gradient as conv_first.wgsl computes it (its
-/// forward stays an implicit GEMM: one pixel per invocation with its 75 inputs in a local
-/// array took 5.5 ms at 400×300 on an H200, against 0.98).
+/// F's first layer (5×5, rgb → C): its forward as conv_first_forward.wgsl computes it, its
+/// weight gradient as conv_first.wgsl does.
 #[derive(Debug)]
 struct FirstLayer {
+    forward: Kernel,
+    /// Whether `forward` runs it, else the implicit GEMM does.
+    direct: bool,
     weight_part: Kernel,
     weight_sum: Kernel,
 }
 
 impl FirstLayer {
+    /// Output channels per workgroup of the direct forward, and its block of pixels.
+    const FORWARD_CHANNELS: u32 = 32;
+    const FORWARD_BLOCK: (u32, u32) = (32, 4);
+
+    /// The direct forward with `COCOG_F_FIRST=direct`, a switch for timing it against the
+    /// implicit GEMM on a GPU before it becomes the default. On an H200 the GEMM took 0.367 ms
+    /// at 100×75 and 0.98 ms at 400×300 (six renders), some 2 % of the GPU's f32 rate: each
+    /// element of its im2col tile pays a division, a bounds test and a gather. On lavapipe the
+    /// direct kernel is the slower (120 against 81 ms at 100×75), which says little of a GPU,
+    /// where its weights are broadcast from workgroup memory. One pixel per invocation with its
+    /// 75 inputs in a local array took 5.5 ms at 400×300 on the H200, so this one keeps its
+    /// sums in named variables.
+    fn direct_forward() -> bool {
+        match std::env::var("COCOG_F_FIRST").as_deref() {
+            Ok("direct") => true,
+            Ok("gemm") | Err(_) => false,
+            Ok(other) => {
+                eprintln!("COCOG_F_FIRST={other}: expected gemm or direct; gemm it is");
+                false
+            }
+        }
+    }
+
+    /// The layer's forward into `z` (the chunk's maps) from renders `size.image0`.. .
+    fn forward(
+        &self,
+        rec: &mut Recorder,
+        layer: ConvLayer,
+        size: MapSize,
+        params: &dyn Bind,
+        renders: &dyn Bind,
+        z: &dyn Bind,
+    ) {
+        let (cin, cout, k, _, _) = layer;
+        assert!(
+            cin == 3 && k == 5,
+            "conv_first_forward.wgsl takes F's 5×5 rgb layer, not {layer:?}"
+        );
+        let u = Compositor::conv_uniform(rec, layer, size);
+        let (bw, bh) = Self::FORWARD_BLOCK;
+        self.forward.dispatch(
+            rec,
+            &[(0, &u), (1, params), (2, renders), (3, z)],
+            [
+                size.width.div_ceil(bw),
+                size.height.div_ceil(bh),
+                size.images * cout.div_ceil(Self::FORWARD_CHANNELS),
+            ],
+        );
+    }
+
     /// Pixels of a staged slice and columns of the result (75 weights and the bias), which
     /// conv_first.wgsl is compiled with, and output channels per workgroup (its 16 × 4 layout
     /// of invocations).
