@@ -808,6 +808,16 @@ impl FirstLayer {
         }
     }
 
+    /// The layer's output channels; its kernels take F's 5×5 rgb layer alone.
+    fn checked(layer: ConvLayer) -> u32 {
+        let (cin, cout, k, _, _) = layer;
+        assert!(
+            cin == 3 && k == 5,
+            "conv_first*.wgsl take F's 5×5 rgb layer, not {layer:?}"
+        );
+        cout
+    }
+
     /// The layer's forward into `z` (the chunk's maps) from renders `size.image0`.. .
     fn forward(
         &self,
@@ -818,11 +828,7 @@ impl FirstLayer {
         renders: &dyn Bind,
         z: &dyn Bind,
     ) {
-        let (cin, cout, k, _, _) = layer;
-        assert!(
-            cin == 3 && k == 5,
-            "conv_first_forward.wgsl takes F's 5×5 rgb layer, not {layer:?}"
-        );
+        let cout = Self::checked(layer);
         let u = Compositor::conv_uniform(rec, layer, size);
         let (bw, bh) = Self::FORWARD_BLOCK;
         self.forward.dispatch(
@@ -856,11 +862,7 @@ impl FirstLayer {
         v_out: &dyn Bind,
         v_params: &dyn Bind,
     ) {
-        let (cin, cout, k, _, _) = layer;
-        assert!(
-            cin == 3 && k == 5,
-            "conv_first.wgsl takes F's 5×5 rgb layer, not {layer:?}"
-        );
+        let cout = Self::checked(layer);
         // Its ranges whole slices.
         let positions = size.images * size.width * size.height;
         let per_part = weight_grad_split(positions).0.next_multiple_of(Self::SLICE);
