@@ -182,7 +182,11 @@ fn least_half_form(k: &Case, tx: u32) -> f64 {
 #[test]
 fn row_spans_are_the_tiles_a_full_scan_passes() {
     let Some(ctx) = gpu() else { return };
-    let source = format!("{}\n{KERNEL}", include_str!("../src/splat/tile_test.wgsl"));
+    // Rows up to 4 tiles wide scanned, as the renderer has it by default.
+    let source = format!(
+        "const SCAN_WIDTH: u32 = 4u;\n{}\n{KERNEL}",
+        include_str!("../src/splat/tile_test.wgsl")
+    );
     let kernel = Kernel::new(ctx, &shader(ctx, "tile spans test", &source), "spans");
     let mut rng = Rng::new(17);
     let mut cases = cases(&mut rng, 600);

@@ -148,6 +148,25 @@ pub fn raster_split_for(ctx: &GpuContext) -> RasterSplit {
 /// however many renderers (training, refocusing, bench) read it.
 static SPLIT_WARNED: std::sync::Once = std::sync::Once::new();
 static BLOCK_WARNED: std::sync::Once = std::sync::Once::new();
+static SPANS_WARNED: std::sync::Once = std::sync::Once::new();
+
+/// The widest rectangle row (in tiles) that the projection and the key emission test tile by
+/// tile; wider rows they take as spans (tile_test.wgsl's `row_span`), a few tile tests each,
+/// with the same tiles. `COCOG_TILE_SPANS=0` has them test every tile (to time the spans
+/// against), `1` or unset the spans; anything else is said on stderr and ignored. Below 5 tiles
+/// a span's seed and end tests cost as much as the row.
+fn scan_width() -> u32 {
+    const SPANS: u32 = 4;
+    match std::env::var("COCOG_TILE_SPANS").as_deref() {
+        Err(_) | Ok("") | Ok("1") => SPANS,
+        Ok("0") => u32::MAX,
+        Ok(other) => {
+            SPANS_WARNED
+                .call_once(|| eprintln!("COCOG_TILE_SPANS={other}: expected 0 or 1; spans it is"));
+            SPANS
+        }
+    }
+}
 
 fn groups(n: u32) -> u32 {
     n.div_ceil(256)
@@ -254,7 +273,11 @@ impl Renderer {
             "{QUAT_TO_ROT_WGSL}\n{}",
             include_str!("project_common.wgsl")
         );
-        let tile_test = include_str!("tile_test.wgsl");
+        let tile_test = format!(
+            "const SCAN_WIDTH: u32 = {}u;\n{}",
+            scan_width(),
+            include_str!("tile_test.wgsl")
+        );
         let project = shader(
             ctx,
             "project",

@@ -31,10 +31,6 @@ fn tile_hits(mean: vec2<f32>, conic: vec3<f32>, threshold: f32, tile: vec2<u32>)
     return 0.5 * q <= threshold + TILE_TEST_MARGIN * (1.0 + threshold);
 }
 
-// Rows of a rectangle at most this wide are tested tile by tile: below it the span's seed and
-// end tests cost more than the row.
-const SCAN_WIDTH: u32 = 4u;
-
 fn span_finite(v: f32) -> bool {
     // Bit test, because fast-math style compilers may fold `v == v`.
     return (bitcast<u32>(v) & 0x7f800000u) != 0x7f800000u;
@@ -58,6 +54,8 @@ fn span_column(v: f32, lo_x: u32, hi_x: u32, fallback: u32) -> u32 {
 // ellipse's extent in the band, and each guess is walked to where `tile_hits` changes: a few
 // tests per row, however wide, and the tiles a full scan would pass (a guess that rounding puts
 // off costs steps, not tiles).
+//
+// Rows at most SCAN_WIDTH tiles wide (prepended by renderer.rs) are scanned tile by tile.
 fn row_span(mean: vec2<f32>, conic: vec3<f32>, threshold: f32, ty: u32, lo_x: u32, hi_x: u32) -> vec2<u32> {
     if (hi_x - lo_x <= SCAN_WIDTH) {
         var first = hi_x;
