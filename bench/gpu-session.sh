@@ -34,8 +34,8 @@
 #                   (COCOG_RASTER_BLOCK=8), in 16×16 tiles on both sides (=16; by default
 #                   the forward takes 8×8 blocks below 2048 tiles, the backward tiles) or with the backward's tile
 #                   lists whole (COCOG_RASTER_SPLIT=1; a GPU's default splits them), or
-#                   testing every tile of each Gaussian's rectangle (COCOG_TILE_SPANS=0; by
-#                   default wide rows are spans); then at
+#                   taking wide rows of each Gaussian's rectangle as spans (COCOG_TILE_SPANS=1;
+#                   by default every tile is tested); then at
 #                   400×300 on the same Gaussians the 3dgs
 #                   step (each of those settings, and 4 chunks) and the cocog step (what a step
 #                   of #12's full-size gate costs), F on the f32 products, by Winograd and on
@@ -213,7 +213,7 @@ phase_step() {
     local model
     model=$(step_model) || return 1
     local m vars
-    for m in 3dgs cocog cocog-tiled cocog-winograd cocog-direct cocog-f32 cocog-coop 3dgs-b8 cocog-b8 3dgs-b16 cocog-b16 3dgs-whole cocog-whole 3dgs-scan cocog-scan; do
+    for m in 3dgs cocog cocog-tiled cocog-winograd cocog-direct cocog-f32 cocog-coop 3dgs-b8 cocog-b8 3dgs-b16 cocog-b16 3dgs-whole cocog-whole 3dgs-spans cocog-spans; do
         echo "-- $m step on the model's Gaussians" >>"$log"
         vars=(COCOG_F_CONV=gemm)  # the rows named cocog-winograd time the default
         [[ $m == *-tiled ]] && vars=(COCOG_F_CONV=tiled)
@@ -228,8 +228,8 @@ phase_step() {
         [[ $m == *-b16 ]] && vars+=(COCOG_RASTER_BLOCK=16)
         # The compositing backward walking each tile's list whole (a GPU's default splits them).
         [[ $m == *-whole ]] && vars+=(COCOG_RASTER_SPLIT=1)
-        # Every tile of each Gaussian's rectangle tested (by default wide rows are spans).
-        [[ $m == *-scan ]] && vars+=(COCOG_TILE_SPANS=0)
+        # Wide rows of each Gaussian's rectangle as spans (by default every tile is tested).
+        [[ $m == *-spans ]] && vars+=(COCOG_TILE_SPANS=1)
         bounded 60 "${clean_env[@]}" "${vars[@]}" "$cocog" bench "$work/in-dev-table" --downscale 4 \
             --resume "$model" --method "${m%%-*}" --iterations 100 --warmup 10 --kernels \
             >>"$log" 2>&1
@@ -296,9 +296,10 @@ phase_peer_synthetic() {
 # The compositing settings the benches compare: whole tile lists in the backward, 8×8 blocks
 # on both sides, 16×16 tiles on both sides (by default the forward takes 8×8 blocks below 2048
 # tiles), tile lists split (as many chunks as RasterSplit::Auto picks, a GPU's default, and 4),
-# and every tile of a Gaussian's rectangle tested, where by default wide rows are taken as spans.
+# and the projection and key emission taking a rectangle's wide rows as spans (by default they
+# test every tile).
 raster_settings=("COCOG_RASTER_SPLIT=1" "COCOG_RASTER_BLOCK=8" "COCOG_RASTER_BLOCK=16"
-    "COCOG_RASTER_SPLIT=auto" "COCOG_RASTER_SPLIT=4" "COCOG_TILE_SPANS=0")
+    "COCOG_RASTER_SPLIT=auto" "COCOG_RASTER_SPLIT=4" "COCOG_TILE_SPANS=1")
 
 # cocog's side of peer-train: sharp-dev at 400×300, 30000 iterations of 3dgs, timed, then scored.
 train_sharp_dev() {

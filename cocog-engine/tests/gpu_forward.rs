@@ -19,7 +19,16 @@ fn compare_with(views: &[View<'_>], min_visible: f64) {
 /// `compare_with`, compositing in workgroups of these blocks.
 fn compare_in_blocks(views: &[View<'_>], min_visible: f64, blocks: RasterBlocks) {
     let Some(ctx) = gpu() else { return };
-    let renderer = Renderer::new(ctx).with_raster_blocks(blocks);
+    compare_on(
+        views,
+        min_visible,
+        Renderer::new(ctx).with_raster_blocks(blocks),
+    );
+}
+
+/// `compare_with` on `renderer`.
+fn compare_on(views: &[View<'_>], min_visible: f64, renderer: Renderer) {
+    let Some(ctx) = gpu() else { return };
     let batch = Batch::from_views(ctx, views).unwrap();
     let state = renderer.forward(ctx, &batch).unwrap();
     assert!(state.num_intersections > 0);
@@ -169,20 +178,25 @@ fn dense_scene_hits_early_termination() {
     }]);
 }
 
-/// Also on a frame 10 tiles wide, whose rows the projection and the key emission take as spans
-/// (tile_test.wgsl's `row_span`) rather than tile by tile.
+/// Also on a frame 10 tiles wide, with the projection and the key emission testing every tile
+/// and taking wide rows as spans (`with_tile_spans`, tile_test.wgsl's `row_span`): the same
+/// tiles either way.
 #[test]
 fn tile_culling_drops_intersections_without_changing_pixels() {
     for (w, h, fainter) in [(64, 48, 2.0), (160, 96, 1.0)] {
-        tile_culling_case(w, h, fainter);
+        let counts = [false, true].map(|spans| tile_culling_case(w, h, fainter, spans));
+        assert_eq!(
+            counts[0], counts[1],
+            "{w}×{h}: intersections scanned vs as spans"
+        );
     }
 }
 
 /// Elongated Gaussians, their opacity logits lowered by `fainter`: their 3σ boxes cover many
 /// tiles they never reach. (On the wide frame, as faint as on the small one, a few pixels meet
 /// a Gaussian at exactly 1/255 alpha, which the f32 and f64 cut-offs decide apart.)
-fn tile_culling_case(w: u32, h: u32, fainter: f32) {
-    let Some(ctx) = gpu() else { return };
+fn tile_culling_case(w: u32, h: u32, fainter: f32, spans: bool) -> u32 {
+    let Some(ctx) = gpu() else { return 0 };
     let cam = test_camera(w, h, 0.3);
     let mut g = random_scene(150, 0, 31, &cam);
     for (i, s) in g.log_scales.iter_mut().enumerate() {
@@ -202,16 +216,15 @@ fn tile_culling_case(w: u32, h: u32, fainter: f32) {
         background: [0.0; 3],
     };
     let batch = Batch::from_views(ctx, &[view]).unwrap();
-    let k = Renderer::new(ctx)
-        .forward(ctx, &batch)
-        .unwrap()
-        .num_intersections;
-    eprintln!("{k} intersections after the tile test, {boxed} in the 3σ boxes");
+    let renderer = || Renderer::new(ctx).with_tile_spans(ctx, spans);
+    let k = renderer().forward(ctx, &batch).unwrap().num_intersections;
+    eprintln!("{k} intersections after the tile test (spans: {spans}), {boxed} in the 3σ boxes");
     assert!(
         k > 0 && k * 10 < boxed * 9,
         "tile test removed too little: {k} of {boxed}"
     );
-    compare(&[view]);
+    compare_on(&[view], 0.5, renderer());
+    k
 }
 
 /// Compositing in whole 16×16 tiles and in 8×8 blocks of a tile (the default forward's):

@@ -32,8 +32,14 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     }
     var count = 0u;
     for (var y = lo.y; y < hi.y; y++) {
-        let span = row_span(f.mean2d, f.conic, threshold, y, lo.x, hi.x);
-        count += span.y - span.x;
+        if (TILE_SPANS) {
+            let span = row_span(f.mean2d, f.conic, threshold, y, lo.x, hi.x);
+            count += span.y - span.x;
+        } else {
+            for (var x = lo.x; x < hi.x; x++) {
+                count += u32(tile_hits(f.mean2d, f.conic, threshold, vec2<u32>(x, y)));
+            }
+        }
     }
     if (count == 0u) {
         return;

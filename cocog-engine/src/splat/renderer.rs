@@ -150,22 +150,59 @@ static SPLIT_WARNED: std::sync::Once = std::sync::Once::new();
 static BLOCK_WARNED: std::sync::Once = std::sync::Once::new();
 static SPANS_WARNED: std::sync::Once = std::sync::Once::new();
 
-/// The widest rectangle row (in tiles) that the projection and the key emission test tile by
-/// tile; wider rows they take as spans (tile_test.wgsl's `row_span`), a few tile tests each,
-/// with the same tiles. `COCOG_TILE_SPANS=0` has them test every tile (to time the spans
-/// against), `1` or unset the spans; anything else is said on stderr and ignored. Below 5 tiles
-/// a span's seed and end tests cost as much as the row.
-fn scan_width() -> u32 {
-    const SPANS: u32 = 4;
+/// Whether the projection and the key emission take a rectangle's rows wider than
+/// `SCAN_WIDTH` tiles as spans (tile_test.wgsl's `row_span`: a seed, two guessed ends and a
+/// few tile tests each, the same tiles) rather than testing every tile: `COCOG_TILE_SPANS=1`.
+/// Off by default until a GPU has timed it: on lavapipe (sharp-dev at 400×300, 63k Gaussians
+/// after 1500 iterations) the two kernels took 7.8–9.2 ms with spans against 4.6–6.1 without,
+/// though a count over that model's rectangles puts the tile tests of the slowest of each 32
+/// Gaussians (what a GPU's subgroup waits for) 37 % lower. Anything but 0 or 1 is said on
+/// stderr and ignored.
+fn tile_spans() -> bool {
     match std::env::var("COCOG_TILE_SPANS").as_deref() {
-        Err(_) | Ok("") | Ok("1") => SPANS,
-        Ok("0") => u32::MAX,
+        Err(_) | Ok("") | Ok("0") => false,
+        Ok("1") => true,
         Ok(other) => {
-            SPANS_WARNED
-                .call_once(|| eprintln!("COCOG_TILE_SPANS={other}: expected 0 or 1; spans it is"));
-            SPANS
+            SPANS_WARNED.call_once(|| {
+                eprintln!("COCOG_TILE_SPANS={other}: expected 0 or 1; the scan it is")
+            });
+            false
         }
     }
+}
+
+/// Below this many tiles a row's span costs as many tile tests as the row (a seed, then two
+/// tests at each end).
+const SCAN_WIDTH: u32 = 4;
+
+/// The projection and the tile-binning kernels (gather_counts, emit_keys, tile_ranges,
+/// check_capacity), taking wide rows as spans or not.
+fn binning_kernels(ctx: &GpuContext, spans: bool) -> (Kernel, Kernel, Kernel, Kernel, Kernel) {
+    let tile_test = format!(
+        "const TILE_SPANS: bool = {spans};\nconst SCAN_WIDTH: u32 = {SCAN_WIDTH}u;\n{}",
+        include_str!("tile_test.wgsl")
+    );
+    let project = shader(
+        ctx,
+        "project",
+        &format!(
+            "{QUAT_TO_ROT_WGSL}\n{}\n{tile_test}\n{}",
+            include_str!("project_common.wgsl"),
+            include_str!("project.wgsl")
+        ),
+    );
+    let tiles = shader(
+        ctx,
+        "tiles",
+        &format!("{tile_test}\n{}", include_str!("tiles.wgsl")),
+    );
+    (
+        Kernel::new(ctx, &project, "project"),
+        Kernel::new(ctx, &tiles, "gather_counts"),
+        Kernel::new(ctx, &tiles, "emit_keys"),
+        Kernel::new(ctx, &tiles, "tile_ranges"),
+        Kernel::new(ctx, &tiles, "check_capacity"),
+    )
 }
 
 fn groups(n: u32) -> u32 {
@@ -273,26 +310,13 @@ impl Renderer {
             "{QUAT_TO_ROT_WGSL}\n{}",
             include_str!("project_common.wgsl")
         );
-        let tile_test = format!(
-            "const SCAN_WIDTH: u32 = {}u;\n{}",
-            scan_width(),
-            include_str!("tile_test.wgsl")
-        );
-        let project = shader(
-            ctx,
-            "project",
-            &format!("{common}\n{tile_test}\n{}", include_str!("project.wgsl")),
-        );
         let project_bwd = shader(
             ctx,
             "project_backward",
             &format!("{common}\n{}", include_str!("project_backward.wgsl")),
         );
-        let tiles = shader(
-            ctx,
-            "tiles",
-            &format!("{tile_test}\n{}", include_str!("tiles.wgsl")),
-        );
+        let (project, gather_counts, emit_keys, tile_ranges, check_capacity) =
+            binning_kernels(ctx, tile_spans());
         let blocks = RasterBlocks::from_env();
         let atomics = if native_atomics && ctx.float_atomics {
             include_str!("atomic_native.wgsl")
@@ -314,12 +338,12 @@ impl Renderer {
             scan: PrefixSum::new(ctx),
             depth_sort: RadixSort::new(ctx, "depth"),
             tile_sort: RadixSort::new(ctx, "tiles"),
-            project: Kernel::new(ctx, &project, "project"),
+            project,
             project_backward: Kernel::new(ctx, &project_bwd, "project_backward"),
-            gather_counts: Kernel::new(ctx, &tiles, "gather_counts"),
-            emit_keys: Kernel::new(ctx, &tiles, "emit_keys"),
-            tile_ranges: Kernel::new(ctx, &tiles, "tile_ranges"),
-            check_capacity: Kernel::new(ctx, &tiles, "check_capacity"),
+            gather_counts,
+            emit_keys,
+            tile_ranges,
+            check_capacity,
             rasterize: Default::default(),
             rasterize_backward_src,
             rasterize_backward: Default::default(),
@@ -327,6 +351,19 @@ impl Renderer {
             blocks,
             raster_split: raster_split_for(ctx),
         }
+    }
+
+    /// The projection and the key emission taking wide rows as spans (`true`) or testing every
+    /// tile, whatever `COCOG_TILE_SPANS` says.
+    pub fn with_tile_spans(mut self, ctx: &GpuContext, spans: bool) -> Self {
+        (
+            self.project,
+            self.gather_counts,
+            self.emit_keys,
+            self.tile_ranges,
+            self.check_capacity,
+        ) = binning_kernels(ctx, spans);
+        self
     }
 
     /// Plans for at most `bytes` per buffer binding instead of the device's limit.

@@ -55,7 +55,8 @@ fn span_column(v: f32, lo_x: u32, hi_x: u32, fallback: u32) -> u32 {
 // tests per row, however wide, and the tiles a full scan would pass (a guess that rounding puts
 // off costs steps, not tiles).
 //
-// Rows at most SCAN_WIDTH tiles wide (prepended by renderer.rs) are scanned tile by tile.
+// Rows at most SCAN_WIDTH tiles wide are scanned tile by tile. renderer.rs prepends it, and
+// TILE_SPANS, which has the two kernels take rows as spans at all (else they test every tile).
 fn row_span(mean: vec2<f32>, conic: vec3<f32>, threshold: f32, ty: u32, lo_x: u32, hi_x: u32) -> vec2<u32> {
     if (hi_x - lo_x <= SCAN_WIDTH) {
         var first = hi_x;

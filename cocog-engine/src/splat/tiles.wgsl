@@ -67,14 +67,24 @@ fn emit_keys(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
     // Past the capacity the pass is flagged as overflowed and redone; write nothing there.
     let stop = min(out + counts[g], params.num_intersections);
     for (var y = lo.y; y < hi.y; y++) {
-        // The same spans as the count in project.wgsl, so exactly counts[g] keys are written;
+        // The same tiles as the count in project.wgsl, so exactly counts[g] keys are written;
         // the bound and the padding below only guard against a compiler evaluating the two
         // copies differently, which would otherwise overwrite other Gaussians' keys.
-        let span = row_span(a.xy, conic, threshold, y, lo.x, hi.x);
-        for (var x = span.x; x < span.y && out < stop; x++) {
-            tile_keys[out] = base + y * params.tiles_x + x;
-            tile_values[out] = g;
-            out++;
+        if (TILE_SPANS) {
+            let span = row_span(a.xy, conic, threshold, y, lo.x, hi.x);
+            for (var x = span.x; x < span.y && out < stop; x++) {
+                tile_keys[out] = base + y * params.tiles_x + x;
+                tile_values[out] = g;
+                out++;
+            }
+        } else {
+            for (var x = lo.x; x < hi.x && out < stop; x++) {
+                if (tile_hits(a.xy, conic, threshold, vec2<u32>(x, y))) {
+                    tile_keys[out] = base + y * params.tiles_x + x;
+                    tile_values[out] = g;
+                    out++;
+                }
+            }
         }
     }
     for (; out < stop; out++) {
