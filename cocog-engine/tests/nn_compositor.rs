@@ -152,11 +152,13 @@ fn to_rgba(m: &Maps) -> Vec<f32> {
 /// at once and in chunks of two (a binding that holds two renders' maps: F's maps of more
 /// renders would outgrow it), storing F's maps in f32 and, where the adapter has it, f16.
 ///
-/// With f16 maps the reference cannot follow the GPU's roundings (a value near a rounding
-/// boundary goes either way, and a flip propagates), so the GPU is checked layer by layer: each
-/// stored map must be the f16 rounding of the exact layer applied to the GPU's map before it,
-/// and the composite and every gradient must be the reference's computed from the GPU's maps.
-/// Chunked runs recompute the same maps, so they are checked against the unchunked run's.
+/// The GPU is checked layer by layer: each stored map must be the exact layer applied to the
+/// GPU's map before it (within f32 rounding, or its f16 rounding: with f16 maps the reference
+/// cannot follow the GPU's roundings, as a value near a rounding boundary goes either way and a
+/// flip propagates), and the composite and every gradient must be the reference's computed from
+/// the GPU's maps, so that a gradient's budget covers the backward's rounding alone, not the
+/// forward's carried through it. Chunked runs recompute the same maps, so they are checked
+/// against the unchunked run's.
 fn gpu_case(mode: CompositeMode, channels: usize, images: usize, h: usize, w: usize, seed: u64) {
     let Some(ctx) = test_gpu() else { return };
     let two = CompositorConfig::with_channels(channels as u32).map_bytes((h * w) as u64, 2);
@@ -333,21 +335,15 @@ fn gpu_case_on(
 
     let (want_blend, want_v_renders, want_v_p, bounds) = match mode {
         CompositeMode::Learned => {
-            let t = match precision {
-                MapPrecision::F32 => {
-                    if let Some(maps) = &stored {
-                        check_stored_f32(maps, &stored_from(&layout, &p, &renders, maps));
-                    }
-                    forward(&layout, &p, &renders)
+            let maps = given.or(stored.as_ref()).expect("an unchunked run's maps");
+            if given.is_none() {
+                let exact = stored_from(&layout, &p, &renders, maps);
+                match precision {
+                    MapPrecision::F32 => check_stored_f32(maps, &exact),
+                    MapPrecision::F16 => check_stored_f16(maps, &exact),
                 }
-                MapPrecision::F16 => {
-                    let maps = given.or(stored.as_ref()).expect("an unchunked run's maps");
-                    if given.is_none() {
-                        check_stored_f16(maps, &stored_from(&layout, &p, &renders, maps));
-                    }
-                    forward_from_stored(&layout, &p, &renders, maps)
-                }
-            };
+            }
+            let t = forward_from_stored(&layout, &p, &renders, maps);
             let b = backward(&layout, &p, &t, &coef);
             (t.blend, b.v_renders, b.v_params, b.bounds)
         }
@@ -383,7 +379,8 @@ fn gpu_case_on(
         }
     }
     // Each parameter's own budget: f32 rounding of its final sum scales with Σ|term| (the
-    // reference reports it), and its inputs carry rounding from the layers above.
+    // reference reports it), and its inputs carry rounding from the backward's layers above
+    // (the forward's maps are the GPU's own). The largest error on lavapipe was 0.74 of it.
     let mut checked = 0;
     for (i, (&got, &want)) in v_p.iter().zip(&want_v_p).enumerate() {
         close(
