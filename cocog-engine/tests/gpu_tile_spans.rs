@@ -182,7 +182,7 @@ fn least_half_form(k: &Case, tx: u32) -> f64 {
 #[test]
 fn row_spans_are_the_tiles_a_full_scan_passes() {
     let Some(ctx) = gpu() else { return };
-    // Rows up to 4 tiles wide scanned, as the renderer has it by default.
+    // Rows up to 4 tiles wide scanned (the renderer scans up to 8), so more rows are spans.
     let source = format!(
         "const SCAN_WIDTH: u32 = 4u;\n{}\n{KERNEL}",
         include_str!("../src/splat/tile_test.wgsl")

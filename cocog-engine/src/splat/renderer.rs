@@ -154,10 +154,10 @@ static SPANS_WARNED: std::sync::Once = std::sync::Once::new();
 /// `SCAN_WIDTH` tiles as spans (tile_test.wgsl's `row_span`: a seed, two guessed ends and a
 /// few tile tests each, the same tiles) rather than testing every tile: `COCOG_TILE_SPANS=1`.
 /// Off by default until a GPU has timed it: on lavapipe (sharp-dev at 400×300, 63k Gaussians
-/// after 1500 iterations) the two kernels took 7.8–9.2 ms with spans against 4.6–6.1 without,
+/// after 1500 iterations) the two kernels took 7.8–9.9 ms with spans against 4.6–6.9 without,
 /// though a count over that model's rectangles puts the tile tests of the slowest of each 32
-/// Gaussians (what a GPU's subgroup waits for) 37 % lower. Anything but 0 or 1 is said on
-/// stderr and ignored.
+/// Gaussians (what a GPU's subgroup waits for) a quarter lower. Anything but 0 or 1 is said
+/// on stderr and ignored.
 fn tile_spans() -> bool {
     match std::env::var("COCOG_TILE_SPANS").as_deref() {
         Err(_) | Ok("") | Ok("0") => false,
@@ -171,9 +171,10 @@ fn tile_spans() -> bool {
     }
 }
 
-/// Below this many tiles a row's span costs as many tile tests as the row (a seed, then two
-/// tests at each end).
-const SCAN_WIDTH: u32 = 4;
+/// Rows up to this many tiles are scanned: a span costs a seed, four end tests and the guesses'
+/// arithmetic, about eight tests. Over a sharp-dev model's rectangles at 400×300 this width
+/// left the slowest of each 32 Gaussians 26 % fewer tests (4: 18 %, 12: 20 %).
+const SCAN_WIDTH: u32 = 8;
 
 /// The projection and the tile-binning kernels (gather_counts, emit_keys, tile_ranges,
 /// check_capacity), taking wide rows as spans or not.
