@@ -176,6 +176,14 @@ fn tile_spans() -> bool {
 /// left the slowest of each 32 Gaussians 26 % fewer tests (4: 18 %, 12: 20 %).
 const SCAN_WIDTH: u32 = 8;
 
+/// What the projection's forward and backward share: bindings, cameras and the forward maths.
+fn projection_common() -> String {
+    format!(
+        "{QUAT_TO_ROT_WGSL}\n{}",
+        include_str!("project_common.wgsl")
+    )
+}
+
 /// The projection and the tile-binning kernels (gather_counts, emit_keys, tile_ranges,
 /// check_capacity), taking wide rows as spans or not.
 fn binning_kernels(ctx: &GpuContext, spans: bool) -> (Kernel, Kernel, Kernel, Kernel, Kernel) {
@@ -187,8 +195,8 @@ fn binning_kernels(ctx: &GpuContext, spans: bool) -> (Kernel, Kernel, Kernel, Ke
         ctx,
         "project",
         &format!(
-            "{QUAT_TO_ROT_WGSL}\n{}\n{tile_test}\n{}",
-            include_str!("project_common.wgsl"),
+            "{}\n{tile_test}\n{}",
+            projection_common(),
             include_str!("project.wgsl")
         ),
     );
@@ -307,14 +315,14 @@ impl Renderer {
     /// compare-exchange fallback and `subgroups = false` per-pixel atomics (to test those
     /// paths on devices that have more); `true` is ignored where the device lacks the feature.
     pub fn with_options(ctx: &GpuContext, native_atomics: bool, subgroups: bool) -> Self {
-        let common = format!(
-            "{QUAT_TO_ROT_WGSL}\n{}",
-            include_str!("project_common.wgsl")
-        );
         let project_bwd = shader(
             ctx,
             "project_backward",
-            &format!("{common}\n{}", include_str!("project_backward.wgsl")),
+            &format!(
+                "{}\n{}",
+                projection_common(),
+                include_str!("project_backward.wgsl")
+            ),
         );
         let (project, gather_counts, emit_keys, tile_ranges, check_capacity) =
             binning_kernels(ctx, tile_spans());
