@@ -63,6 +63,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         a_k_fast: true,
         b_k_fast: false,
         split_k: false,
+        ones_column: false,
         tile: GemmTile::for_shape(M, n),
     };
     let gemm = Gemm::new(&ctx, "bench gemm", problem, layout);

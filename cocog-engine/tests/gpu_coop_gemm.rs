@@ -81,6 +81,7 @@ fn product_matches_f64(ctx: &cocog_engine::GpuContext, name: &str, block: CoopBl
             a_k_fast,
             b_k_fast,
             split_k,
+            ones_column: false,
             tile: GemmTile::SQUARE,
         };
         let scales = OperandScales { a: 4.0, b: 0.5 };

@@ -15,9 +15,11 @@ fn check(layout: GemmLayout, m: usize, n: usize, k: usize, batches: usize, seed:
     let a: Vec<f32> = (0..batches * m * k)
         .map(|_| rng.range_f32(-1.0, 1.0))
         .collect();
-    let b: Vec<f32> = (0..batches * k * n)
+    let mut b: Vec<f32> = (0..batches * k * n)
         .map(|_| rng.range_f32(-1.0, 1.0))
         .collect();
+    // A ones column is never loaded: what the buffer holds there must not reach C.
+    let ones = layout.ones_column.then_some(n - 1);
     let at = |bt: usize, i: usize, kk: usize| {
         f64::from(if layout.a_k_fast {
             a[(bt * m + i) * k + kk]
@@ -25,12 +27,25 @@ fn check(layout: GemmLayout, m: usize, n: usize, k: usize, batches: usize, seed:
             a[(bt * k + kk) * m + i]
         })
     };
-    let bt_ = |bt: usize, kk: usize, j: usize| {
-        f64::from(if layout.b_k_fast {
-            b[(bt * n + j) * k + kk]
+    let b_at = |bt: usize, kk: usize, j: usize| {
+        if layout.b_k_fast {
+            (bt * n + j) * k + kk
         } else {
-            b[(bt * k + kk) * n + j]
-        })
+            (bt * k + kk) * n + j
+        }
+    };
+    if let Some(j) = ones {
+        for bt in 0..batches {
+            for kk in 0..k {
+                b[b_at(bt, kk, j)] = 7.0;
+            }
+        }
+    }
+    let bt_ = |bt: usize, kk: usize, j: usize| {
+        if Some(j) == ones {
+            return 1.0;
+        }
+        f64::from(b[b_at(bt, kk, j)])
     };
     let gemm = Gemm::new(
         ctx,
@@ -90,6 +105,7 @@ fn every_layout_and_tile_matches_f64() {
                     a_k_fast,
                     b_k_fast,
                     split_k: false,
+                    ones_column: false,
                     tile,
                 };
                 check(layout, 70, 45, 37, 1, 1);
@@ -109,6 +125,7 @@ fn split_k_sums_every_range_and_batch_once() {
                 a_k_fast,
                 b_k_fast,
                 split_k: true,
+                ones_column: false,
                 tile,
             };
             // K far beyond one part, and not a multiple of the tile depth.
@@ -120,6 +137,29 @@ fn split_k_sums_every_range_and_batch_once() {
             // batches of K = 600 (at most three parts each), and one batch of 5 parts.
             check(layout, 8, 12, 600, 3, 7);
             check(layout, 64, 77, 1300, 1, 8);
+        }
+    }
+}
+
+/// A bias's gradient: B's last column is ones, summed on the side by the first column of tiles.
+/// The shapes put that column just past a full tile (N = 65: one tile, not two), inside a
+/// partial one, and alone beside a single column; K spans several parts and batches.
+#[test]
+fn a_ones_column_is_the_row_sums() {
+    for tile in TILES {
+        for (a_k_fast, b_k_fast) in [(false, false), (true, true)] {
+            for split_k in [false, true] {
+                let layout = GemmLayout {
+                    a_k_fast,
+                    b_k_fast,
+                    split_k,
+                    ones_column: true,
+                    tile,
+                };
+                check(layout, 64, 65, 1300, 1, 9);
+                check(layout, 70, 92, 300, 2, 10);
+                check(layout, 5, 2, 777, 1, 11);
+            }
         }
     }
 }

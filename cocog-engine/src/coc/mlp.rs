@@ -37,17 +37,15 @@ fn epilogue(b: u32, m: u32, n: u32, v: f32) {
 }
 ";
 
-/// ∂/∂W[o][i] = Σ_g ∂/∂Y[g][o]·X[g][i], and the bias as an extra column of ones (i = fan in).
-/// M = fan out, N = fan in + 1, K = Gaussians; u0 the fan in, u2/u3 the offsets.
+/// ∂/∂W[o][i] = Σ_g ∂/∂Y[g][o]·X[g][i], and the bias as B's column of ones (i = fan in), which
+/// the product sums on the side (`GemmLayout::ones_column`). M = fan out, N = fan in + 1,
+/// K = Gaussians; u0 the fan in, u2/u3 the offsets.
 const WEIGHT_GRAD: &str = "
 @group(0) @binding(2) var<storage, read> dy: array<f32>;
 @group(0) @binding(3) var<storage, read> x: array<f32>;
 @group(0) @binding(4) var<storage, read_write> v_weights: array<f32>;
 fn load_a(b: u32, m: u32, k: u32) -> f32 { return dy[k * gemm.m + m]; }
-fn load_b(b: u32, k: u32, n: u32) -> f32 {
-    if n == gemm.u0 { return 1.0; }
-    return x[k * gemm.u0 + n];
-}
+fn load_b(b: u32, k: u32, n: u32) -> f32 { return x[k * gemm.u0 + n]; }
 fn epilogue(b: u32, m: u32, n: u32, v: f32) {
     if n == gemm.u0 {
         v_weights[gemm.u3 + m] = v;
@@ -88,6 +86,7 @@ impl MlpActivations {
 
 impl MlpKernels {
     pub fn new(ctx: &GpuContext, layout: MlpLayout) -> Self {
+        // Only the weight gradient sums over Gaussians, and only it has the bias's ones column.
         let gemm = |label: &str, src: &str, a_k_fast: bool, b_k_fast: bool, split_k: bool| {
             Gemm::new(
                 ctx,
@@ -97,6 +96,7 @@ impl MlpKernels {
                     a_k_fast,
                     b_k_fast,
                     split_k,
+                    ones_column: split_k,
                     tile: GemmTile::SQUARE,
                 },
             )

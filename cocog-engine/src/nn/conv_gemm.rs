@@ -209,6 +209,7 @@ fn problems(
             a_k_fast,
             b_k_fast,
             split_k,
+            ones_column: false,
             tile: if split_k { weights } else { maps },
         },
         scales,

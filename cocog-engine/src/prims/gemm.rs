@@ -80,6 +80,10 @@ pub struct GemmLayout {
     pub b_k_fast: bool,
     /// Sum K in independent ranges, then reduce (for K ≫ M·N).
     pub split_k: bool,
+    /// B's last column is all ones (a bias's gradient): never loaded, its products are A's row
+    /// sums, which the first column of tiles adds on the side. Without it, a 64-wide layer's
+    /// bias made N = 65 and a second column of tiles 98 % padding.
+    pub ones_column: bool,
     pub tile: GemmTile,
 }
 
@@ -304,10 +308,12 @@ impl Gemm {
         let (ty, tx) = (layout.tile.thread_rows, layout.tile.thread_cols);
         let source = format!(
             "const A_K_FAST: bool = {};\nconst B_K_FAST: bool = {};\nconst SPLIT: bool = {};\n\
+             const ONES_COLUMN: bool = {};\n\
              const TY: u32 = {ty}u;\nconst TX: u32 = {tx}u;\nconst BK: u32 = {bk}u;\n{}\n{problem}\n{}",
             layout.a_k_fast,
             layout.b_k_fast,
             layout.split_k,
+            layout.ones_column,
             concat!(include_str!("gemm_common.wgsl"), include_str!("gemm.wgsl")),
             partials_source(layout.split_k),
         );
@@ -381,7 +387,8 @@ impl Gemm {
         block: CoopBlock,
     ) -> Option<Self> {
         let fragments = ctx.cooperative?;
-        if !Self::fits(ctx, block, fragments) {
+        // gemm_coop.wgsl multiplies every column; the row sums are gemm.wgsl's alone.
+        if layout.ones_column || !Self::fits(ctx, block, fragments) {
             return None;
         }
         let source = Self::cooperative_source(problem, layout, scales, fragments, block);
@@ -430,6 +437,7 @@ impl Gemm {
         format!(
             "enable f16;\nenable wgpu_cooperative_matrix;\n\
              const A_K_FAST: bool = {};\nconst B_K_FAST: bool = {};\nconst SPLIT: bool = {};\n\
+             const ONES_COLUMN: bool = false;\n\
              const SCALE_A: f32 = {:?};\nconst SCALE_B: f32 = {:?};\n\
              const FR: u32 = {side}u;\nconst SG: u32 = {}u;\n\
              const GM: u32 = {gm}u;\nconst GN: u32 = {gn}u;\nconst WM: u32 = {wm}u;\n\
@@ -496,7 +504,9 @@ impl Gemm {
             return;
         }
         let (bm, bn, bk) = self.block();
-        let tiles = shape.m.div_ceil(bm) * shape.n.div_ceil(bn);
+        let cols = shape.n - u32::from(self.layout.ones_column);
+        debug_assert!(cols > 0, "a ones column needs another column beside it");
+        let tiles = shape.m.div_ceil(bm) * cols.div_ceil(bn);
         let parts = self.parts(&shape, tiles, rec.ctx().binding_limit());
         let k_split = shape.k.div_ceil(parts).next_multiple_of(bk).max(bk);
         let parts = shape.k.div_ceil(k_split).max(1);
@@ -521,7 +531,8 @@ impl Gemm {
                 let partials = ws.buffer(rec.ctx(), "gemm partials", bytes);
                 all.push((1, &partials));
                 self.tile.dispatch(rec, &all, grid);
-                reduce.dispatch_1d(rec, &all, (shape.m * shape.n).div_ceil(256));
+                // gemm_reduce: 64 values per workgroup, four invocations each.
+                reduce.dispatch_1d(rec, &all, (shape.m * shape.n).div_ceil(64));
             }
         }
     }

@@ -6,6 +6,8 @@
 //                                    neighbouring addresses)
 //   const SPLIT: bool                 K is cut into ranges whose partial products gemm_reduce
 //                                    sums in a fixed order
+//   const ONES_COLUMN: bool           B's last column is all ones and never loaded: the first
+//                                    column of tiles sums A's rows into C's last column
 //   const TY, TX, BK: u32             the workgroup's threads as TY rows × TX columns (each
 //                                    computes 4×4 values: a tile of 4·TY × 4·TX) and the depth
 //                                    of a staged slice
@@ -35,7 +37,8 @@ fn gemm_tile(
     // Inline, not in block_of: naga's uniformity analysis takes a call's result as
     // non-uniform, and a return under it would put the cooperative products out of uniform
     // control flow.
-    if wg.y * nwg.x + wg.x >= ((gemm.m + BM - 1u) / BM) * ((gemm.n + BN - 1u) / BN) {
+    if wg.y * nwg.x + wg.x >= ((gemm.m + BM - 1u) / BM)
+        * ((gemm.n - select(0u, 1u, ONES_COLUMN) + BN - 1u) / BN) {
         return;
     }
     let blk = block_of(wg, nwg);
@@ -47,6 +50,9 @@ fn gemm_tile(
     let k_end = blk.k_end;
     let tx = lid % TX;
     let ty = lid / TX;
+    let cols = tile_cols();
+    let sums_rows = ONES_COLUMN && n0 == 0u;
+    var rows = vec4<f32>(0.0);
     var acc0 = vec4<f32>(0.0);
     var acc1 = vec4<f32>(0.0);
     var acc2 = vec4<f32>(0.0);
@@ -73,7 +79,7 @@ fn gemm_tile(
                 nn = e / BK;
             }
             var vb = 0.0;
-            if n0 + nn < gemm.n && kb + kk < k_end {
+            if n0 + nn < cols && kb + kk < k_end {
                 vb = load_b(b, kb + kk, n0 + nn);
             }
             tile_b[kk * TX + nn / 4u][nn % 4u] = vb;
@@ -86,21 +92,38 @@ fn gemm_tile(
             acc1 += a.y * bv;
             acc2 += a.z * bv;
             acc3 += a.w * bv;
+            if sums_rows {
+                rows += a;
+            }
         }
         workgroupBarrier();
     }
     let m = m0 + 4u * ty;
     let n = n0 + 4u * tx;
     for (var j = 0u; j < 4u; j++) {
-        finish(b, m, n + j, z, acc0[j]);
-        finish(b, m + 1u, n + j, z, acc1[j]);
-        finish(b, m + 2u, n + j, z, acc2[j]);
-        finish(b, m + 3u, n + j, z, acc3[j]);
+        if n + j < cols {
+            finish(b, m, n + j, z, acc0[j]);
+            finish(b, m + 1u, n + j, z, acc1[j]);
+            finish(b, m + 2u, n + j, z, acc2[j]);
+            finish(b, m + 3u, n + j, z, acc3[j]);
+        }
+    }
+    if sums_rows && tx == 0u {
+        finish(b, m, gemm.n - 1u, z, rows.x);
+        finish(b, m + 1u, gemm.n - 1u, z, rows.y);
+        finish(b, m + 2u, gemm.n - 1u, z, rows.z);
+        finish(b, m + 3u, gemm.n - 1u, z, rows.w);
     }
 }
 
-// One thread per C(m, n): the partial products of every batch and part, summed in a fixed order
-// (four interleaved running sums, then their pairs).
+// REDUCE_LANES invocations per C(m, n), each summing every REDUCE_LANES-th slice of the partial
+// products in four running sums (so loads are in flight together), then their sums in a fixed
+// order. One invocation per value left the h_θ weight gradients' sums (4160 values, 227
+// slices) to 16 workgroups of long load chains.
+const REDUCE_LANES: u32 = 4u;
+const REDUCE_VALUES: u32 = 256u / REDUCE_LANES;
+var<workgroup> lane_sums: array<f32, 256>;
+
 @compute @workgroup_size(256)
 fn gemm_reduce(
     @builtin(workgroup_id) wg: vec3<u32>,
@@ -108,23 +131,30 @@ fn gemm_reduce(
     @builtin(local_invocation_index) lid: u32,
 ) {
     touch_all();
-    let t = (wg.y * nwg.x + wg.x) * 256u + lid;
-    if t >= gemm.m * gemm.n {
-        return;
-    }
+    // Neighbouring invocations take neighbouring values of one slice: coalesced loads.
+    let lane = lid / REDUCE_VALUES;
+    let t = (wg.y * nwg.x + wg.x) * REDUCE_VALUES + lid % REDUCE_VALUES;
+    let inside = t < gemm.m * gemm.n;
     let m = t / gemm.n;
     let n = t % gemm.n;
-    // Four running sums, so four loads are in flight: one chain of every slice's partial in
-    // turn left the h_θ weight gradients' sums (4160 outputs, 226 slices) latency-bound.
     let slices = gemm.batches * gemm.parts;
     var s = vec4<f32>(0.0);
-    var z = 0u;
-    for (; z + 3u < slices; z += 4u) {
-        s += vec4<f32>(load_partial(z, m, n), load_partial(z + 1u, m, n),
-            load_partial(z + 2u, m, n), load_partial(z + 3u, m, n));
+    if inside {
+        var z = lane;
+        let step = REDUCE_LANES;
+        for (; z + 3u * step < slices; z += 4u * step) {
+            s += vec4<f32>(load_partial(z, m, n), load_partial(z + step, m, n),
+                load_partial(z + 2u * step, m, n), load_partial(z + 3u * step, m, n));
+        }
+        for (; z < slices; z += step) {
+            s.x += load_partial(z, m, n);
+        }
     }
-    for (; z < slices; z++) {
-        s.x += load_partial(z, m, n);
+    lane_sums[lid] = (s.x + s.y) + (s.z + s.w);
+    workgroupBarrier();
+    if inside && lane == 0u {
+        let v = REDUCE_VALUES;
+        epilogue(0u, m, n, (lane_sums[lid] + lane_sums[lid + v])
+            + (lane_sums[lid + 2u * v] + lane_sums[lid + 3u * v]));
     }
-    epilogue(0u, m, n, (s.x + s.y) + (s.z + s.w));
 }

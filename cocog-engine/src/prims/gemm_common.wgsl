@@ -48,6 +48,13 @@ fn touch_all() {
     }
 }
 
+// The columns of C that tiles cover: with ONES_COLUMN, B's last column is all ones (a bias's
+// gradient), and its products are A's row sums, which the first column of tiles adds on the
+// side instead of a whole further column of tiles multiplying by one.
+fn tile_cols() -> u32 {
+    return gemm.n - select(0u, 1u, ONES_COLUMN);
+}
+
 fn finish(b: u32, m: u32, n: u32, z: u32, v: f32) {
     if m < gemm.m && n < gemm.n {
         if SPLIT {
@@ -72,7 +79,7 @@ struct Block {
 }
 
 fn block_of(wg: vec3<u32>, nwg: vec3<u32>) -> Block {
-    let tiles_n = (gemm.n + BN - 1u) / BN;
+    let tiles_n = (tile_cols() + BN - 1u) / BN;
     let tile = wg.y * nwg.x + wg.x;
     let part = wg.z % gemm.parts;
     let k_begin = part * gemm.k_split;
