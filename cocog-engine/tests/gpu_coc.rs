@@ -9,7 +9,9 @@ mod common;
 use cocog_engine::coc::reference::{
     Base, Expanded, MlpTrace, expand, expand_backward, gate, input, mlp_backward, mlp_forward,
 };
-use cocog_engine::coc::{CocConfig, CocKernels, CocStep, CocVariant, INPUT_DIM, init_weights};
+use cocog_engine::coc::{
+    CAMERA_DIM, CocConfig, CocKernels, CocStep, CocVariant, MEAN_DIM, ROW_DIM, init_weights,
+};
 use cocog_engine::{GpuContext, Workspace, test_gpu};
 use common::Rng;
 
@@ -151,8 +153,15 @@ fn run_gpu(ctx: &GpuContext, config: CocConfig, inp: &Inputs) -> Gpu {
     let read = |b: &wgpu::Buffer, len: usize| ctx.read::<f32>(b, len).unwrap();
     let w = config.width as usize;
     let a = &exp.acts;
+    // The GPU keeps γ(x_cam) once per step, beside the folded bias: each row is rebuilt whole.
+    let camera = read(&a.camera, w + CAMERA_DIM);
+    let rows = read(&a.input, N * ROW_DIM);
+    let input = rows
+        .chunks(ROW_DIM)
+        .flat_map(|r| [&r[..MEAN_DIM], &camera[w..], &r[MEAN_DIM..]].concat())
+        .collect();
     let acts = [
-        read(&a.input, N * INPUT_DIM),
+        input,
         read(&a.hidden[0], N * w),
         read(&a.hidden[1], N * w),
         read(&a.hidden[2], N * w),
@@ -185,7 +194,12 @@ fn gpu_trace(acts: &[Vec<f32>; 5], i: usize, config: &CocConfig) -> MlpTrace {
             .collect()
     };
     MlpTrace {
-        layers: [row(0, INPUT_DIM), row(1, w), row(2, w), row(3, w)],
+        layers: [
+            row(0, ROW_DIM + CAMERA_DIM),
+            row(1, w),
+            row(2, w),
+            row(3, w),
+        ],
         heads: row(4, h),
     }
 }

@@ -1,13 +1,14 @@
-// The per-Gaussian ends of h_θ's forward, one thread per base Gaussian: `embed` writes the
-// 91-wide input rows the trunk's matrix products read; `expand` turns the heads into the
-// M + 1 sets. The trunk itself runs as tiled matrix products (mlp.rs).
+// The ends of h_θ's forward: `fold_camera` takes the step's camera into the first layer's
+// bias; per base Gaussian, `embed` writes the input rows the trunk's matrix products read and
+// `expand` turns the heads into the M + 1 sets. The trunk runs as tiled matrix products
+// (mlp.rs).
 
 @group(0) @binding(0) var<uniform> step: Step;
 @group(0) @binding(1) var<storage, read> means: array<f32>;
 @group(0) @binding(2) var<storage, read> log_scales: array<f32>;
 @group(0) @binding(3) var<storage, read> quats: array<f32>;
 @group(0) @binding(4) var<storage, read> focus: array<f32>;
-// [Gaussian][IN_DIM]: γ(μ) | γ(camera centre) | exp(log-scale) | q/|q|.
+// [Gaussian][ROW_DIM]: γ(μ) | exp(log-scale) | q/|q| (γ(camera centre) is in `camera`).
 @group(0) @binding(5) var<storage, read_write> inputs: array<f32>;
 // [Gaussian][HEADS], the last layer's outputs.
 @group(0) @binding(6) var<storage, read> heads: array<f32>;
@@ -19,6 +20,11 @@
 @group(0) @binding(10) var<storage, read_write> gates: array<vec4<f32>>;
 // Per training view, the lens variant's aperture a (K = a·d).
 @group(0) @binding(11) var<storage, read> apertures: array<f32>;
+// h_θ's flat parameters, and the step's camera terms: [WIDTH] the first layer's bias plus its
+// camera columns times γ(camera centre), then [CAMERA_DIM] γ(camera centre) itself, which
+// the weight gradient of those columns multiplies.
+@group(0) @binding(12) var<storage, read> weights: array<f32>;
+@group(0) @binding(13) var<storage, read_write> camera: array<f32>;
 
 fn put_embedding(x: vec3<f32>, freqs: u32, at: u32) -> u32 {
     var k = at;
@@ -33,6 +39,21 @@ fn put_embedding(x: vec3<f32>, freqs: u32, at: u32) -> u32 {
         k += 6u;
     }
     return k;
+}
+
+// Component j of NeRF's embedding of x (without π) at `freqs` frequencies: x, then sin and
+// cos of 2^f·x per frequency f, as put_embedding lays them out.
+fn embedding(x: vec3<f32>, j: u32) -> f32 {
+    if j < 3u {
+        return x[j];
+    }
+    let f = (j - 3u) / 6u;
+    let r = (j - 3u) % 6u;
+    let s = x * f32(1u << f);
+    if r < 3u {
+        return sin(s)[r];
+    }
+    return cos(s)[r - 3u];
 }
 
 fn base_mean(g: u32) -> vec3<f32> {
@@ -54,14 +75,30 @@ fn embed(
     if g >= step.n {
         return;
     }
-    var k = put_embedding((base_mean(g) - step.origin) / step.scale, MEAN_FREQS, g * IN_DIM);
-    k = put_embedding((step.centre - step.origin) / step.scale, CAMERA_FREQS, k);
+    let k = put_embedding((base_mean(g) - step.origin) / step.scale, MEAN_FREQS, g * ROW_DIM);
     for (var j = 0u; j < 3u; j++) {
         inputs[k + j] = exp(log_scales[3u * g + j]) / step.scale;
     }
     let unit = base_unit_quat(g);
     for (var j = 0u; j < 4u; j++) {
         inputs[k + 3u + j] = unit[j];
+    }
+}
+
+// One workgroup; every Gaussian's first-layer sum then starts from camera[o].
+@compute @workgroup_size(64)
+fn fold_camera(@builtin(local_invocation_index) lid: u32) {
+    let x = (step.centre - step.origin) / step.scale;
+    for (var j = lid; j < CAMERA_DIM; j += 64u) {
+        camera[WIDTH + j] = embedding(x, j);
+    }
+    for (var o = lid; o < WIDTH; o += 64u) {
+        let row = o * IN_DIM + MEAN_DIM;
+        var s = weights[W0_BIAS + o];
+        for (var j = 0u; j < CAMERA_DIM; j++) {
+            s += weights[row + j] * embedding(x, j);
+        }
+        camera[o] = s;
     }
 }
 

@@ -2,7 +2,9 @@
 //! at both ends (forward.wgsl, backward.wgsl), the trunk as matrix products (mlp.rs). Every
 //! per-step buffer comes from the caller's `Workspace`.
 
-use super::layout::{CAMERA_FREQS, CocConfig, CocVariant, INPUT_DIM, MEAN_FREQS};
+use super::layout::{
+    CAMERA_DIM, CAMERA_FREQS, CocConfig, CocVariant, INPUT_DIM, MEAN_DIM, MEAN_FREQS, ROW_DIM,
+};
 use super::mlp::{MlpActivations, MlpKernels};
 use crate::ParamBuffers;
 use crate::core::{GpuBuffer, GpuContext, Kernel, Recorder, Workspace, shader};
@@ -75,6 +77,7 @@ pub struct CocGrads {
 pub struct CocKernels {
     config: CocConfig,
     embed: Kernel,
+    fold_camera: Kernel,
     expand: Kernel,
     mlp: MlpKernels,
     backward: Kernel,
@@ -86,12 +89,19 @@ pub struct CocKernels {
 fn prelude(config: &CocConfig) -> String {
     let hl = config.heads();
     let width = config.width;
+    let (_, _, w0, b0) = config.mlp().layers[0];
+    assert_eq!(
+        w0, 0,
+        "fold_camera reads the first layer's weights from offset 0"
+    );
     let s = format!(
         "const M: u32 = {m}u;\nconst WIDTH: u32 = {width}u;\nconst HEADS: u32 = {heads}u;\n\
          const PAPER: bool = {paper};\nconst LENS: bool = {lens};\nconst CENTRED: bool = {centred};\nconst MODULATE_BASE: bool = {modulate_base};\nconst H_APERTURE: u32 = {ha}u;\nconst H_BETA: u32 = {hb}u;\n\
          const H_POS: u32 = {hp}u;\nconst H_SCALE: u32 = {hs}u;\nconst H_ROT: u32 = {hr}u;\n\
          const IN_DIM: u32 = {INPUT_DIM}u;\nconst MEAN_FREQS: u32 = {MEAN_FREQS}u;\n\
-         const CAMERA_FREQS: u32 = {CAMERA_FREQS}u;\n",
+         const CAMERA_FREQS: u32 = {CAMERA_FREQS}u;\nconst MEAN_DIM: u32 = {MEAN_DIM}u;\n\
+         const CAMERA_DIM: u32 = {CAMERA_DIM}u;\nconst ROW_DIM: u32 = {ROW_DIM}u;\n\
+         const W0_BIAS: u32 = {b0}u;\n",
         m = hl.copies,
         heads = hl.len,
         paper = config.variant == CocVariant::Paper,
@@ -118,6 +128,7 @@ impl CocKernels {
         Self {
             config,
             embed: Kernel::new(ctx, &fwd, "embed"),
+            fold_camera: Kernel::new(ctx, &fwd, "fold_camera"),
             expand: Kernel::new(ctx, &fwd, "expand"),
             mlp: MlpKernels::new(ctx, config.mlp()),
             backward: Kernel::new(ctx, &bwd, "backward"),
@@ -185,6 +196,8 @@ impl CocKernels {
             ],
             n.div_ceil(64),
         );
+        self.fold_camera
+            .dispatch(rec, &[(0, &u), (12, weights), (13, &a.camera)], [1, 1, 1]);
         self.mlp.encode_forward(rec, ws, weights, a, n);
         self.expand.dispatch_1d(
             rec,

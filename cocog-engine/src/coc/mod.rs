@@ -19,6 +19,9 @@ pub mod reference;
 mod refocus;
 
 pub use gpu::{CocExpansion, CocGrads, CocKernels, CocStep};
-pub use layout::{CocConfig, CocVariant, HeadLayout, INPUT_DIM, MlpLayout, init_weights};
+pub use layout::{
+    CAMERA_DIM, CocConfig, CocVariant, HeadLayout, INPUT_DIM, MEAN_DIM, MlpLayout, ROW_DIM,
+    init_weights,
+};
 pub use mlp::MlpActivations;
 pub use refocus::{Frame, Lens, Refocus};
