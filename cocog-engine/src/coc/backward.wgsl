@@ -40,9 +40,8 @@ fn backward(
     let norm = length(q);
     let unit = q / norm;
 
-    for (var j = 0u; j < HEADS; j++) {
-        d_heads[dh + j] = 0.0;
-    }
+    // Each head's gradient below is written once (every index is a different head, and each
+    // variant writes all of its own), so d_heads needs no zeroing and no read-back.
     // Offsets are D × normalised ones, whose gradient is D × the world one; centring
     // subtracts the copies' mean offset, so each offset's gradient loses their mean.
     var g_mean = vec3<f32>(0.0);
@@ -69,7 +68,7 @@ fn backward(
             v_ls[k] += gl;
             let h = heads[hh + H_SCALE + 3u * m + k];
             let d = multiplier(cm, h);
-            d_heads[dh + H_SCALE + 3u * m + k] += gl * cm * d.y / d.x;
+            d_heads[dh + H_SCALE + 3u * m + k] = gl * cm * d.y / d.x;
             v_gate += gl * h * d.y / d.x;
         }
         for (var k = 0u; k < 4u; k++) {
@@ -77,7 +76,7 @@ fn backward(
             let h = heads[hh + H_ROT + 4u * m + k];
             let d = multiplier(cm, h);
             v_unit[k] += gq * d.x;
-            d_heads[dh + H_ROT + 4u * m + k] += gq * unit[k] * cm * d.y;
+            d_heads[dh + H_ROT + 4u * m + k] = gq * unit[k] * cm * d.y;
             v_gate += gq * unit[k] * h * d.y;
         }
         if m == M {
@@ -92,16 +91,16 @@ fn backward(
             let dir = raw / len;
             let dot_g = dot(dir, g_off);
             v_k += 0.5 * c * beta * dot_g;
-            d_heads[dh + H_BETA + m] += 0.5 * aperture_k * c * dot_g * beta * (1.0 - beta);
+            d_heads[dh + H_BETA + m] = 0.5 * aperture_k * c * dot_g * beta * (1.0 - beta);
             v_gate += 0.5 * aperture_k * beta * dot_g;
             let v_raw = 0.5 * aperture_k * c * beta * (g_off - dir * dot_g) / len;
-            d_heads[dh + H_POS + 3u * m] += v_raw.x;
-            d_heads[dh + H_POS + 3u * m + 1u] += v_raw.y;
-            d_heads[dh + H_POS + 3u * m + 2u] += v_raw.z;
+            d_heads[dh + H_POS + 3u * m] = v_raw.x;
+            d_heads[dh + H_POS + 3u * m + 1u] = v_raw.y;
+            d_heads[dh + H_POS + 3u * m + 2u] = v_raw.z;
         } else {
-            d_heads[dh + H_POS + 3u * m] += c * g_off.x;
-            d_heads[dh + H_POS + 3u * m + 1u] += c * g_off.y;
-            d_heads[dh + H_POS + 3u * m + 2u] += c * g_off.z;
+            d_heads[dh + H_POS + 3u * m] = c * g_off.x;
+            d_heads[dh + H_POS + 3u * m + 1u] = c * g_off.y;
+            d_heads[dh + H_POS + 3u * m + 2u] = c * g_off.z;
             v_gate += dot(raw, g_off);
         }
     }
