@@ -1,7 +1,7 @@
 // Stable LSD radix sort of (u32 key, u32 value) pairs, 8 bits per pass.
 // Per pass: `count_digits` builds a digit-major histogram [256][blocks] of each block of 1024
 // pairs, PrefixSum turns it into each (digit, block)'s first output position, and `scatter`
-// sorts its block by the pass's digit in workgroup memory (one stable one-bit split per bit)
+// sorts its block by the pass's digit in workgroup memory (stable splits, 3 bits a round)
 // and writes each pair to its (digit, block) position plus its rank among the block's pairs
 // of that digit. The local sort keeps equal digits in input order (stability is what makes LSD
 // radix correct) and writes each digit's run of a block to consecutive addresses.
@@ -90,12 +90,32 @@ fn count_digits(
 
 var<workgroup> local_keys: array<u32, 1024>;
 var<workgroup> local_values: array<u32, 1024>;
-var<workgroup> sums: array<u32, 256>;
+// Per thread, its counts of each of a round's 8 buckets, two 16-bit fields a word.
+var<workgroup> sums: array<vec4<u32>, 256>;
 // Per digit, its first position in the locally sorted block.
 var<workgroup> starts: array<u32, 257>;
 
-// Inclusive sum of `v` over threads 0..=tid.
-fn scan(tid: u32, v: u32) -> u32 {
+// The local sort splits the block on ROUND_BITS bits at a time (stable counting sorts of 8
+// buckets): three rounds and their scans for an 8- or 9-bit digit, where one-bit splits took
+// eight or nine, each with a scan's 17 barriers. Counts and positions stay below 2^16 (a block
+// is 1024), so each vec4<u32> holds 8 of them as 16-bit fields and adds them all at once.
+const ROUND_BITS: u32 = 3u;
+const BUCKETS: u32 = 8u;
+
+// Field b of 8 packed 16-bit fields.
+fn field(p: vec4<u32>, b: u32) -> u32 {
+    return (p[b >> 1u] >> (16u * (b & 1u))) & 0xffffu;
+}
+
+// 1 in field b.
+fn unit(b: u32) -> vec4<u32> {
+    var u = vec4<u32>(0u);
+    u[b >> 1u] = 1u << (16u * (b & 1u));
+    return u;
+}
+
+// Inclusive sum of `v` over threads 0..=tid, field by field.
+fn scan(tid: u32, v: vec4<u32>) -> vec4<u32> {
     sums[tid] = v;
     workgroupBarrier();
     for (var off = 1u; off < THREADS; off <<= 1u) {
@@ -149,33 +169,36 @@ fn scatter(
         }
     }
     workgroupBarrier();
-    // Thread tid owns positions 4·tid … 4·tid + 3 during the splits.
-    // A dropping pass splits on one more bit: its digits run to DIGITS.
+    // Thread tid owns positions 4·tid … 4·tid + 3 during the rounds.
+    // A dropping pass sorts one more bit: its digits run to DIGITS.
     let bits = countOneBits(params.mask) + params.drop;
-    for (var b = 0u; b < bits; b++) {
+    for (var shift = 0u; shift < bits; shift += ROUND_BITS) {
         var k: array<u32, 4>;
         var v: array<u32, 4>;
-        var ones = 0u;
+        var own = vec4<u32>(0u);
         for (var i = 0u; i < ITEMS; i++) {
             k[i] = local_keys[ITEMS * tid + i];
             v[i] = local_values[ITEMS * tid + i];
-            ones += (digit_of(k[i]) >> b) & 1u;
+            own += unit((digit_of(k[i]) >> shift) & (BUCKETS - 1u));
         }
-        let ones_through = scan(tid, ones);
-        let total_ones = sums[THREADS - 1u];
+        let through = scan(tid, own);
+        let total = sums[THREADS - 1u];
         workgroupBarrier();
-        var one_at = BLOCK - total_ones + ones_through - ones;
-        var zero_at = ITEMS * tid - (ones_through - ones);
+        // Each bucket's run starts after the smaller buckets' totals; within it, this thread's
+        // items come after the earlier threads' (an inclusive scan less its own count never
+        // borrows across fields).
+        var at = through - own;
+        var run = 0u;
+        for (var b = 0u; b < BUCKETS; b++) {
+            at[b >> 1u] += run << (16u * (b & 1u));
+            run += field(total, b);
+        }
         for (var i = 0u; i < ITEMS; i++) {
-            if (((digit_of(k[i]) >> b) & 1u) == 1u) {
-                local_keys[one_at] = k[i];
-                local_values[one_at] = v[i];
-                one_at += 1u;
-            } else {
-                local_keys[zero_at] = k[i];
-                local_values[zero_at] = v[i];
-                zero_at += 1u;
-            }
+            let b = (digit_of(k[i]) >> shift) & (BUCKETS - 1u);
+            let p = field(at, b);
+            local_keys[p] = k[i];
+            local_values[p] = v[i];
+            at += unit(b);
         }
         workgroupBarrier();
     }
