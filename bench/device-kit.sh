@@ -3,14 +3,16 @@
 # in the git-ignored .gl/ and .device/ of the project root:
 #   .gl/                 the Vulkan loader and GL dispatch packages the machine lacks (amd64 .debs)
 #   .device/cocog.xz     the release `cocog`, stripped
-#   .device/gemm-bench.xz  `cargo bench --bench gemm --no-run`, stripped
+#   .device/gemm-bench.xz  `cargo bench --bench gemm --no-run`, stripped; or, with
+#                        OLD_COCOG=PATH [OLD_NAME=NAME], that other build as cocog-old.xz (and
+#                        its name in cocog-old.txt) for gpu-session.sh's `ab` phase
 #   .device/tests.tar.xz the GPU test executables of the engine and the trainer, stripped
 #   .device/bench/       sharp-dev, defocus-dev/dev-table and dev-shelf from ../shared/bench,
 #                        without depth/ and baseline/
 #   .device/lpips/       the LPIPS-Alex weights (scripts/lpips/fetch-weights.sh; VGG left out)
 #   .device/gsplat-1.5.3-py3-none-any.whl  the peer, for bench/peer_gsplat.py
 #
-#   bench/device-kit.sh [SHARED]   (SHARED defaults to ../shared)
+#   [OLD_COCOG=PATH OLD_NAME=NAME] bench/device-kit.sh [SHARED]   (SHARED defaults to ../shared)
 #
 # The run tool carries at most 64 MiB with the working tree; this prints the total and fails
 # past it. Takes about 10 minutes on 2 cores from a clean target/.
@@ -52,10 +54,21 @@ for line in sys.stdin:
     if m.get("reason") == "compiler-artifact" and m.get("executable") and m["profile"]["test"]:
         print(m["target"]["name"], m["executable"])'
 }
-gemm=$(executables cargo bench -p cocog-engine --bench gemm | awk '$1 == "gemm" { print $2 }')
-[[ -n "$gemm" ]] || { echo "device-kit: cargo built no gemm bench" >&2; exit 1; }
-strip -o /tmp/device-kit-gemm "$gemm"
-xz -T0 -c /tmp/device-kit-gemm >.device/gemm-bench.xz
+# OLD_COCOG=PATH (a release `cocog` of another commit; OLD_NAME says which) travels as
+# cocog-old for the session script's `ab` phase, in gemm-bench's place: both do not fit the
+# 64 MiB. Without it, no stale old build stays behind to be compared under a wrong name.
+rm -f .device/cocog-old.xz .device/cocog-old.txt
+if [[ -n "${OLD_COCOG:-}" ]]; then
+    rm -f .device/gemm-bench.xz
+    strip -o /tmp/device-kit-cocog-old "$OLD_COCOG"
+    xz -T0 -6 -c /tmp/device-kit-cocog-old >.device/cocog-old.xz
+    echo "${OLD_NAME:-$OLD_COCOG}" >.device/cocog-old.txt
+else
+    gemm=$(executables cargo bench -p cocog-engine --bench gemm | awk '$1 == "gemm" { print $2 }')
+    [[ -n "$gemm" ]] || { echo "device-kit: cargo built no gemm bench" >&2; exit 1; }
+    strip -o /tmp/device-kit-gemm "$gemm"
+    xz -T0 -c /tmp/device-kit-gemm >.device/gemm-bench.xz
+fi
 
 rm -rf /tmp/device-kit-tests && mkdir -p /tmp/device-kit-tests/tests
 executables cargo test -p cocog-engine -p cocog-train >/tmp/device-kit-tests/list

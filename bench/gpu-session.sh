@@ -12,7 +12,7 @@
 # follows it, so the default order puts tests first; tests stop starting executables when the
 # later phases would no longer fit (each phase's need: need_of). The default phases fit one call
 # of BUDGET=540. A second call made at once fits train-split and layouts (`BUDGET=250 ...
-# train-split layouts`); peer-synthetic (#11's 1M-Gaussian figure, met on 2026-11-27) only where
+# train-split layouts`), or `ab` where the kit carries an older build; peer-synthetic (#11's 1M-Gaussian figure, met on 2026-11-27) only where
 # the lease has room left.
 #
 # BUDGET (seconds, default 560) bounds the whole call: a phase that would not fit what is left is
@@ -57,6 +57,12 @@
 #   train-split     peer-train's cocog run with the backward's tile lists split
 #                   (COCOG_RASTER_SPLIT, default auto), then `cocog eval`           ~80 s
 #   idle-bench      `cocog bench` rows of sharp-dev at 100×75 and 1M random Gaussians at 1080p
+#   ab              where DEV has another build (cocog-old, packed by device-kit.sh's
+#                   OLD_COCOG; cocog-old.txt names it): the 3dgs and cocog steps at 100×75 and
+#                   400×300 on step's Gaussians (and the 3dgs step on peer-train's sharp-dev
+#                   model where that ran here), each build in turn, twice, every switch at its
+#                   default, with the per-kernel split: an A/B of two builds on one machine
+#                                                                               ~100 s (an estimate)
 #   tests           the GPU test executables (f64 references, finite differences)      ~90 s
 #                   (TESTS="NAME ..." runs only those; gpu_coop_gemm alone takes seconds)
 #   gates SET...    bench/gates.sh's quality runs at once (--jobs 12), interrupted where they would
@@ -86,7 +92,7 @@ work="${WORK:-/tmp/gpu-session}"
 mkdir -p "$work"
 # Executables may travel xz-compressed (DEV/NAME.xz), as everything carried shares 64 MiB.
 # Unpacked on every call: a warm machine keeps WORK, and a later call may carry a rebuilt one.
-for exe in cocog gemm-bench; do
+for exe in cocog gemm-bench cocog-old; do
     if [[ -f "$dev/$exe.xz" ]]; then
         xz -dc "$dev/$exe.xz" >"$work/$exe.new" && chmod +x "$work/$exe.new" &&
             mv -f "$work/$exe.new" "$work/$exe"
@@ -334,6 +340,36 @@ phase_train_split() {
     COCOG_RASTER_SPLIT="${COCOG_RASTER_SPLIT:-auto}" train_sharp_dev "$work/split-sharp-dev"
 }
 
+# Each build in turn, twice, on one machine: the defaults of two builds compared.
+phase_ab() {
+    if [[ ! -x "$work/cocog-old" ]]; then
+        echo "-- no cocog-old in $dev: nothing to compare with" >>"$log"
+        return 0
+    fi
+    local model
+    model=$(step_model) || return 1
+    echo "-- cocog-old is $(cat "$dev/cocog-old.txt" 2>/dev/null || echo 'an unnamed build')" >>"$log"
+    local round build row method down iters warm
+    for round in 1 2; do
+        for build in cocog-old cocog; do
+            for row in "3dgs 4 100 10" "cocog 4 100 10" "3dgs 1 100 10" "cocog 1 20 5"; do
+                read -r method down iters warm <<<"$row"
+                echo "-- ab round $round, $build: $method step at --downscale $down" >>"$log"
+                bounded 60 "${clean_env[@]}" "$work/$build" bench "$work/in-dev-table" \
+                    --downscale "$down" --resume "$model" --method "$method" \
+                    --iterations "$iters" --warmup "$warm" --kernels >>"$log" 2>&1
+            done
+            # #11's step: sharp-dev's model where peer-train trained it on this machine.
+            local sd="$work/peer-cocog-sharp-dev"
+            if [[ -f "$sd/gaussians.ply" ]]; then
+                echo "-- ab round $round, $build: 3dgs step on peer-train's sharp-dev model" >>"$log"
+                bounded 30 "${clean_env[@]}" "$work/$build" bench "$work/in-sharp-dev" --resume "$sd" \
+                    --method 3dgs --iterations 200 --warmup 20 --kernels >>"$log" 2>&1
+            fi
+        done
+    done
+}
+
 phase_idle_bench() {
     bounded 90 "$cocog" bench "$work/in-sharp-dev" --downscale 4 --iterations 300 --warmup 30 \
         >>"$log" 2>&1
@@ -389,7 +425,7 @@ phase_gates() {
 # left as $2 seconds where given (0: done).
 need_of() {
     case "$1" in
-        train-split | idle-bench | tests) echo 120 ;;
+        train-split | idle-bench | tests | ab) echo 120 ;;
         step) echo 150 ;;
         layouts) echo 130 ;;
         # Each with gsplat's build (about 70 s) where it is not done: what a background build
@@ -436,7 +472,7 @@ while ((i < ${#phases[@]})); do
     p="${phases[i]}"
     i=$((i + 1))
     case "$p" in
-        step | layouts | peer-synthetic | peer-train | train-split | idle-bench)
+        step | layouts | peer-synthetic | peer-train | train-split | idle-bench | ab)
             run_phase "$p" "$(need_of "$p")" ;;
         tests)
             tests_next=$i
