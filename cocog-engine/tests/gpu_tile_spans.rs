@@ -8,6 +8,7 @@
 
 mod common;
 
+use cocog_engine::splat::FINITE_WGSL;
 use cocog_engine::{Kernel, shader};
 use common::{Rng, gpu};
 
@@ -184,7 +185,7 @@ fn row_spans_are_the_tiles_a_full_scan_passes() {
     let Some(ctx) = gpu() else { return };
     // Rows up to 4 tiles wide scanned (the renderer scans up to 8), so more rows are spans.
     let source = format!(
-        "const SCAN_WIDTH: u32 = 4u;\n{}\n{KERNEL}",
+        "const SCAN_WIDTH: u32 = 4u;\n{FINITE_WGSL}\n{}\n{KERNEL}",
         include_str!("../src/splat/tile_test.wgsl")
     );
     let kernel = Kernel::new(ctx, &shader(ctx, "tile spans test", &source), "spans");

@@ -120,6 +120,7 @@ fn gemm_tile(
 // products in four running sums (so loads are in flight together), then their sums in a fixed
 // order. One invocation per value left the h_θ weight gradients' sums (4160 values, 227
 // slices) to 16 workgroups of long load chains.
+// Four: the last sum below names each lane.
 const REDUCE_LANES: u32 = 4u;
 const REDUCE_VALUES: u32 = 256u / REDUCE_LANES;
 var<workgroup> lane_sums: array<f32, 256>;

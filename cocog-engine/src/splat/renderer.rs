@@ -12,6 +12,8 @@ use crate::types::sh_coeffs_per_channel;
 /// WGSL of `quat_to_rot(q: vec4<f32>) -> mat3x3<f32>`, the rotation of a unit (w, x, y, z)
 /// quaternion, for shaders outside the engine that need the renderer's exact convention.
 pub const QUAT_TO_ROT_WGSL: &str = include_str!("quat.wgsl");
+/// `finite`, which project_common.wgsl and tile_test.wgsl both use.
+pub const FINITE_WGSL: &str = include_str!("finite.wgsl");
 
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
@@ -179,7 +181,7 @@ const SCAN_WIDTH: u32 = 8;
 /// What the projection's forward and backward share: bindings, cameras and the forward maths.
 fn projection_common() -> String {
     format!(
-        "{QUAT_TO_ROT_WGSL}\n{}",
+        "{QUAT_TO_ROT_WGSL}\n{FINITE_WGSL}\n{}",
         include_str!("project_common.wgsl")
     )
 }
@@ -203,7 +205,7 @@ fn binning_kernels(ctx: &GpuContext, spans: bool) -> (Kernel, Kernel, Kernel, Ke
     let tiles = shader(
         ctx,
         "tiles",
-        &format!("{tile_test}\n{}", include_str!("tiles.wgsl")),
+        &format!("{FINITE_WGSL}\n{tile_test}\n{}", include_str!("tiles.wgsl")),
     );
     (
         Kernel::new(ctx, &project, "project"),

@@ -31,14 +31,9 @@ fn tile_hits(mean: vec2<f32>, conic: vec3<f32>, threshold: f32, tile: vec2<u32>)
     return 0.5 * q <= threshold + TILE_TEST_MARGIN * (1.0 + threshold);
 }
 
-fn span_finite(v: f32) -> bool {
-    // Bit test, because fast-math style compilers may fold `v == v`.
-    return (bitcast<u32>(v) & 0x7f800000u) != 0x7f800000u;
-}
-
 // Column `v` (already rounded) clamped into [lo_x, hi_x), or `fallback` where it is not finite.
 fn span_column(v: f32, lo_x: u32, hi_x: u32, fallback: u32) -> u32 {
-    if (!span_finite(v)) {
+    if (!finite(v)) {
         return fallback;
     }
     return u32(clamp(v, f32(lo_x), f32(hi_x - 1u)));
