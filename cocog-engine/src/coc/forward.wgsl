@@ -85,18 +85,24 @@ fn embed(
     }
 }
 
+// γ(camera centre), computed once for fold_camera's 64 invocations.
+var<workgroup> camera_embedding: array<f32, CAMERA_DIM>;
+
 // One workgroup; every Gaussian's first-layer sum then starts from camera[o].
 @compute @workgroup_size(64)
 fn fold_camera(@builtin(local_invocation_index) lid: u32) {
     let x = (step.centre - step.origin) / step.scale;
     for (var j = lid; j < CAMERA_DIM; j += 64u) {
-        camera[WIDTH + j] = embedding(x, j);
+        let e = embedding(x, j);
+        camera_embedding[j] = e;
+        camera[WIDTH + j] = e;
     }
+    workgroupBarrier();
     for (var o = lid; o < WIDTH; o += 64u) {
-        let row = o * IN_DIM + MEAN_DIM;
+        let row = W0 + o * IN_DIM + MEAN_DIM;
         var s = weights[W0_BIAS + o];
         for (var j = 0u; j < CAMERA_DIM; j++) {
-            s += weights[row + j] * embedding(x, j);
+            s += weights[row + j] * camera_embedding[j];
         }
         camera[o] = s;
     }

@@ -90,10 +90,6 @@ fn prelude(config: &CocConfig) -> String {
     let hl = config.heads();
     let width = config.width;
     let (_, _, w0, b0) = config.mlp().layers[0];
-    assert_eq!(
-        w0, 0,
-        "fold_camera reads the first layer's weights from offset 0"
-    );
     let s = format!(
         "const M: u32 = {m}u;\nconst WIDTH: u32 = {width}u;\nconst HEADS: u32 = {heads}u;\n\
          const PAPER: bool = {paper};\nconst LENS: bool = {lens};\nconst CENTRED: bool = {centred};\nconst MODULATE_BASE: bool = {modulate_base};\nconst H_APERTURE: u32 = {ha}u;\nconst H_BETA: u32 = {hb}u;\n\
@@ -101,7 +97,7 @@ fn prelude(config: &CocConfig) -> String {
          const IN_DIM: u32 = {INPUT_DIM}u;\nconst MEAN_FREQS: u32 = {MEAN_FREQS}u;\n\
          const CAMERA_FREQS: u32 = {CAMERA_FREQS}u;\nconst MEAN_DIM: u32 = {MEAN_DIM}u;\n\
          const CAMERA_DIM: u32 = {CAMERA_DIM}u;\nconst ROW_DIM: u32 = {ROW_DIM}u;\n\
-         const W0_BIAS: u32 = {b0}u;\n",
+         const W0: u32 = {w0}u;\nconst W0_BIAS: u32 = {b0}u;\n",
         m = hl.copies,
         heads = hl.len,
         paper = config.variant == CocVariant::Paper,

@@ -100,7 +100,12 @@ var<workgroup> starts: array<u32, 257>;
 // eight or nine, each with a scan's 17 barriers. Counts and positions stay below 2^16 (a block
 // is 1024), so each vec4<u32> holds 8 of them as 16-bit fields and adds them all at once.
 const ROUND_BITS: u32 = 3u;
-const BUCKETS: u32 = 8u;
+const BUCKETS: u32 = 1u << ROUND_BITS;
+
+// The bucket of `key` in the round at bit `shift`.
+fn bucket(key: u32, shift: u32) -> u32 {
+    return (digit_of(key) >> shift) & (BUCKETS - 1u);
+}
 
 // Field b of 8 packed 16-bit fields.
 fn field(p: vec4<u32>, b: u32) -> u32 {
@@ -179,7 +184,7 @@ fn scatter(
         for (var i = 0u; i < ITEMS; i++) {
             k[i] = local_keys[ITEMS * tid + i];
             v[i] = local_values[ITEMS * tid + i];
-            own += unit((digit_of(k[i]) >> shift) & (BUCKETS - 1u));
+            own += unit(bucket(k[i], shift));
         }
         let through = scan(tid, own);
         let total = sums[THREADS - 1u];
@@ -194,7 +199,7 @@ fn scatter(
             run += field(total, b);
         }
         for (var i = 0u; i < ITEMS; i++) {
-            let b = (digit_of(k[i]) >> shift) & (BUCKETS - 1u);
+            let b = bucket(k[i], shift);
             let p = field(at, b);
             local_keys[p] = k[i];
             local_values[p] = v[i];
