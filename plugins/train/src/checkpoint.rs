@@ -64,6 +64,9 @@ pub struct FocusState {
 pub struct TrainState {
     /// Iterations completed.
     pub iteration: u32,
+    /// The iteration whose point addition last rebuilt the Gaussians' Adam state (0: none):
+    /// their bias correction counts steps from there. Older checkpoints lack it and read 0.
+    pub adam_origin: u32,
     /// Train views of the run; a resume must train on the same list.
     pub views: u32,
     /// Image shrink factor of the run, checked on resume (the state is resolution-specific
@@ -178,6 +181,7 @@ impl TrainState {
             ("format".to_owned(), FORMAT.to_owned()),
             ("version".to_owned(), VERSION.to_owned()),
             ("iteration".to_owned(), self.iteration.to_string()),
+            ("adam_origin".to_owned(), self.adam_origin.to_string()),
             ("views".to_owned(), self.views.to_string()),
             ("downscale".to_owned(), self.downscale.to_string()),
             ("sh_degree".to_owned(), p.sh_degree.to_string()),
@@ -408,6 +412,11 @@ impl<'a> Reader<'a> {
             .map_err(|_| self.fail(format!("metadata `order_stack` = {stack:?}")))?;
         Ok(TrainState {
             iteration: self.number("iteration")?,
+            adam_origin: if self.meta.contains_key("adam_origin") {
+                self.number("adam_origin")?
+            } else {
+                0
+            },
             views: self.number("views")?,
             downscale: self.number("downscale")?,
             params,
@@ -432,6 +441,7 @@ mod tests {
         let seq = |len: usize, at: f32| (0..len).map(|i| at + i as f32 * 0.5).collect::<Vec<_>>();
         TrainState {
             iteration: 1234,
+            adam_origin: 1000,
             views: 21,
             downscale: 4,
             params: GaussianParams {

@@ -254,6 +254,8 @@ pub struct Trainer<'c> {
     /// What depth-weighted pruning calls depth.
     depth_axis: crate::DepthAxis,
     iteration: u32,
+    /// Adam's step count for the Gaussians restarts after this iteration (`Resumed`).
+    adam_origin: u32,
     profiling: bool,
     /// Densify through the CPU rule even where the doubled set fits a binding.
     cpu_densification: bool,
@@ -282,6 +284,7 @@ impl<'c> Trainer<'c> {
             rng: SplitMix64::new(config.seed ^ 0xD3A5_17F0_0000_0001),
             order: ViewOrder::new(views.len(), config.seed),
             iteration: 0,
+            adam_origin: 0,
             params,
             coc: None,
         };
@@ -362,6 +365,7 @@ impl<'c> Trainer<'c> {
             cameras,
             scene_scale,
             iteration: state.iteration,
+            adam_origin: state.adam_origin,
             profiling: false,
             cpu_densification: false,
             most,
@@ -624,6 +628,7 @@ impl<'c> Trainer<'c> {
         if let Some(d) = d.as_ref().filter(|d| d.adds_points_at(it)) {
             let before = self.num_gaussians();
             self.add_points(d)?;
+            self.adam_origin = it;
             self.grow_capacity_with(before);
         }
         if plan.reset_opacity && !reset_in_step {
@@ -842,6 +847,11 @@ impl<'c> Trainer<'c> {
             (&p.quats, v[2], &m.quats, c.rotation_lr),
             (&p.opacity_logits, v[3], &m.opacity_logits, c.opacity_lr),
         ];
+        // Adam's step count, restarted where the point addition rebuilt the moments: counted
+        // from iteration 1 instead, the bias correction is already ~1 over zeroed moments,
+        // and the first hundred updates after the rebuild come out 3–6× the rebuilt
+        // optimizer's.
+        let t = it.saturating_sub(self.adam_origin).max(1);
         let skip = Some(&status.buffer);
         let reset_skips = if plan.reset_opacity { 3 } else { groups.len() };
         for (k, (param, grad, moments, rate)) in groups.into_iter().enumerate() {
@@ -849,11 +859,11 @@ impl<'c> Trainer<'c> {
                 continue;
             }
             self.adam
-                .encode(rec, param, grad, moments, &lr(rate), it, skip);
+                .encode(rec, param, grad, moments, &lr(rate), t, skip);
         }
         let coeffs = sh_coeffs_per_channel(p.sh_degree) as u32;
         let sh_lr = lr(c.feature_lr).interleaved(coeffs, c.feature_rest_lr());
-        self.adam.encode(rec, &p.sh, v[4], &m.sh, &sh_lr, it, skip);
+        self.adam.encode(rec, &p.sh, v[4], &m.sh, &sh_lr, t, skip);
     }
 }
 
@@ -865,6 +875,9 @@ pub(super) struct Resumed {
     rng: SplitMix64,
     order: ViewOrder,
     iteration: u32,
+    /// The point addition's iteration once it has run (0 before): the released code rebuilds
+    /// its optimizer there, so the Gaussians' Adam bias correction starts again after it.
+    adam_origin: u32,
     /// CoCoGaussian's lens model, when resuming a run that has one.
     coc: Option<crate::CocCheckpoint>,
 }

@@ -42,6 +42,7 @@ impl<'c> Trainer<'c> {
         let (order_rng, stack) = self.order.state();
         Ok(TrainState {
             iteration: self.iteration,
+            adam_origin: self.adam_origin,
             views: self.targets.len() as u32,
             downscale,
             params: self.gaussians()?,
@@ -108,6 +109,7 @@ impl<'c> Trainer<'c> {
                 state.order_stack.iter().map(|&v| v as usize).collect(),
             ),
             iteration: state.iteration,
+            adam_origin: state.adam_origin,
             params,
             coc: state.coc.clone(),
         };
