@@ -39,7 +39,8 @@ pub fn box_volume(means: &[[f32; 3]]) -> f64 {
         .product()
 }
 
-/// Per axis, the `TRIM`-th smallest and largest coordinate (all of them for few means).
+/// Per axis, the released code's `sorted[TRIM]` and `sorted[-TRIM]` (the extremes for few
+/// means).
 fn robust_box(means: &[[f32; 3]]) -> ([f64; 3], [f64; 3]) {
     let mut lo = [0.0; 3];
     let mut hi = [0.0; 3];
@@ -48,7 +49,7 @@ fn robust_box(means: &[[f32; 3]]) -> ([f64; 3], [f64; 3]) {
         v.sort_by(f64::total_cmp);
         let trim = if v.len() > 2 * TRIM { TRIM } else { 0 };
         lo[a] = v[trim];
-        hi[a] = v[v.len() - 1 - trim];
+        hi[a] = v[v.len() - trim.max(1)];
     }
     (lo, hi)
 }
@@ -199,5 +200,14 @@ mod tests {
         assert_eq!((added, out.len()), (0, 50));
         // Re-initialisation still happens (the released code re-initialises every Gaussian).
         assert!(out.opacity_logits.iter().all(|o| *o < 0.0));
+    }
+
+    #[test]
+    fn the_box_is_the_released_codes_tenth_from_either_end() {
+        // Coordinates 0..100 on every axis, out of order: sorted[10] = 10, sorted[-10] = 90.
+        let v: Vec<[f32; 3]> = (0..100).map(|i| [((i * 37) % 100) as f32; 3]).collect();
+        assert_eq!(robust_box(&v), ([10.0; 3], [90.0; 3]));
+        let few: Vec<[f32; 3]> = (0..20).map(|i| [i as f32, 0.0, -(i as f32)]).collect();
+        assert_eq!(robust_box(&few), ([0.0, 0.0, -19.0], [19.0, 0.0, 0.0]));
     }
 }
