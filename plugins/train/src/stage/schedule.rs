@@ -252,7 +252,7 @@ pub fn options() -> Vec<OptionSpec> {
         int("densify_from", "densify after this iteration (500)"),
         int(
             "densify_until",
-            "densify and reset opacity before this iteration (15000)",
+            "densify and reset opacity before this iteration (auto, inria 15000; deblur 20000)",
         ),
         int("densify_every", "iterations between densifications (100)"),
         float(
@@ -274,7 +274,8 @@ pub fn options() -> Vec<OptionSpec> {
         ),
         int(
             "opacity_reset_every",
-            "clamp all opacities to 0.01 every N iterations while densifying; 0 never (3000)",
+            "clamp all opacities to 0.01 every N iterations while densifying; 0 never (auto, \
+             inria 3000; deblur 0)",
         ),
         int("sh_every", "raise the SH degree every N iterations (1000)"),
         float(
