@@ -482,9 +482,16 @@ pub struct ScheduleArgs {
     /// 1.1³) and drops those with no Gaussian within --add-points-distance. Default 200000.
     #[arg(long = "add-points-max")]
     pub add_points_max: Option<u32>,
-    /// Drop candidates with no Gaussian this close, in scene units. Default 2.0.
+    /// Drop candidates with no Gaussian this close, in scene units. Default 2.0 in the units
+    /// of --add-points-frame.
     #[arg(long = "add-points-distance", value_parser = finite)]
     pub add_points_distance: Option<f64>,
+    /// The units the addition's volume rule and distance are read in: `colmap`, the frame
+    /// COLMAP's mapper leaves a reconstruction in (camera centres' robust box 10 across), where
+    /// the released code's data live and it adds about 200k points; or `scene`, this scene's
+    /// own units (in metres it adds a handful). Default scene.
+    #[arg(long = "add-points-frame", value_parser = ["colmap", "scene"])]
+    pub add_points_frame: Option<String>,
 }
 
 /// A duration in seconds: finite and not negative.

@@ -147,6 +147,7 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
                 "lambda_dssim" => s.lambda_dssim, "position_lr" => s.position_lr,
                 "add_points_at" => s.add_points_at, "add_points_max" => s.add_points_max,
                 "add_points_distance" => s.add_points_distance,
+                "add_points_frame" => s.add_points_frame.clone(),
             });
             run("train", &a.io.scene, &a.io.output, o)
         }

@@ -17,6 +17,73 @@ const TRIM: usize = 10;
 /// The candidate count is the initial cloud's box volume over this cubed (`pts_rate`).
 const RATE: f64 = 1.1;
 
+/// The units the rule's two constants are read in: the volume that sets how many points it
+/// draws and the 2.0 cut-off distance. The released code reads them in its data's own units,
+/// COLMAP's mapper output, which the mapper normalises so that the camera centres' robust box
+/// is 10 across; there a forward-facing capture is hundreds of units deep and the count
+/// reaches the cap (the supplementary's "approximately 200k points"). In a scene measured in
+/// metres the same formula draws a handful.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PointsFrame {
+    /// COLMAP's normalised frame, from the training cameras (`colmap_unit`).
+    Colmap,
+    /// The scene's own units, whatever they are.
+    Scene,
+}
+
+impl PointsFrame {
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Colmap => "colmap",
+            Self::Scene => "scene",
+        }
+    }
+
+    pub fn parse(name: &str) -> Option<Self> {
+        match name {
+            "colmap" => Some(Self::Colmap),
+            "scene" => Some(Self::Scene),
+            _ => None,
+        }
+    }
+
+    /// One unit of this frame in scene units, for cameras centred at `centres`.
+    pub fn unit(self, centres: &[[f64; 3]]) -> f64 {
+        match self {
+            Self::Colmap => colmap_unit(centres).unwrap_or(1.0),
+            Self::Scene => 1.0,
+        }
+    }
+}
+
+/// The scene length that COLMAP's `Reconstruction::Normalize` (its defaults: extent 10,
+/// percentiles 0.1 and 0.9 of the image centres) maps to one unit: the diagonal of the box
+/// between those percentiles per axis, over 10. `None` when the box is degenerate.
+pub fn colmap_unit(centres: &[[f64; 3]]) -> Option<f64> {
+    let n = centres.len();
+    if n == 0 {
+        return None;
+    }
+    // COLMAP's indices: p·(n − 1), truncated, once there are more than 3 images.
+    let (i0, i1) = if n > 3 {
+        (
+            (0.1 * (n - 1) as f64) as usize,
+            (0.9 * (n - 1) as f64) as usize,
+        )
+    } else {
+        (0, n - 1)
+    };
+    let diagonal = (0..3)
+        .map(|a| {
+            let mut v: Vec<f64> = centres.iter().map(|c| c[a]).collect();
+            v.sort_by(f64::total_cmp);
+            (v[i1] - v[i0]).powi(2)
+        })
+        .sum::<f64>()
+        .sqrt();
+    (diagonal.is_finite() && diagonal > 0.0).then_some(diagonal / 10.0)
+}
+
 /// How many points the rule adds at most: the initial cloud's box volume / 1.1³, capped.
 pub fn candidate_count(initial_volume: f64, max: u32) -> usize {
     let n = initial_volume / RATE.powi(3);
@@ -209,5 +276,25 @@ mod tests {
         assert_eq!(robust_box(&v), ([10.0; 3], [90.0; 3]));
         let few: Vec<[f32; 3]> = (0..20).map(|i| [i as f32, 0.0, -(i as f32)]).collect();
         assert_eq!(robust_box(&few), ([0.0, 0.0, -19.0], [19.0, 0.0, 0.0]));
+    }
+
+    #[test]
+    fn the_colmap_unit_is_the_robust_camera_box_over_ten() {
+        // 11 centres 0..10 along x (shuffled), y and z fixed: indices 1 and 9 → box 8 → 0.8.
+        let line: Vec<[f64; 3]> = (0..11)
+            .map(|i| [((i * 7) % 11) as f64, 2.0, -1.0])
+            .collect();
+        assert!((colmap_unit(&line).unwrap() - 0.8).abs() < 1e-12);
+        // A diagonal: 3-4-0 per step, so the box's diagonal is 5 per step between them.
+        let diag: Vec<[f64; 3]> = (0..21)
+            .map(|i| [3.0 * i as f64, 4.0 * i as f64, 0.0])
+            .collect();
+        assert!((colmap_unit(&diag).unwrap() - 5.0 * 16.0 / 10.0).abs() < 1e-12);
+        // Three cameras or fewer span their whole box; one camera has none.
+        let few = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 2.0, 0.0]];
+        assert!((colmap_unit(&few).unwrap() - 5f64.sqrt() / 10.0).abs() < 1e-12);
+        assert_eq!(colmap_unit(&[[1.0, 2.0, 3.0]]), None);
+        assert_eq!(PointsFrame::Colmap.unit(&[[1.0, 2.0, 3.0]]), 1.0);
+        assert_eq!(PointsFrame::Scene.unit(&line), 1.0);
     }
 }

@@ -28,7 +28,7 @@ mod stage;
 mod stats;
 mod trainer;
 
-pub use add_points::{add_points, box_volume, candidate_count};
+pub use add_points::{PointsFrame, add_points, box_volume, candidate_count, colmap_unit};
 pub use bench::{
     BenchOptions, BenchReport, KernelMs, PhaseMs, SyntheticSpec, run_bench, run_bench_synthetic,
 };

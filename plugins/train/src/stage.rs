@@ -459,14 +459,21 @@ impl Stage for Train {
             .scene_scale(&cameras, &points.means)
             .map_err(|e| StageError::Input(format!("{}: {e}", req.input.display())))?;
         plan.config.scene_scale = Some(scene_scale);
-        // The addition's size follows the initial cloud (method.md §8.1), also when resuming.
-        let volume = crate::box_volume(&points.means);
+        // The addition's size follows the initial cloud (method.md §8.1), also when resuming,
+        // measured in the frame the rule's constants are meant for.
+        let centres: Vec<[f64; 3]> = cameras.iter().map(cocog_engine::Camera::centre).collect();
+        let unit = plan.schedule.points_frame.unit(&centres);
+        let volume = crate::box_volume(&points.means) / unit.powi(3);
+        let distance_given = req.options.get_f64("add_points_distance").is_some();
         for d in [&mut plan.schedule.densify]
             .into_iter()
             .chain(plan.config.densify.as_mut())
         {
             d.add_points_count =
                 crate::candidate_count(volume, d.add_points_count).min(u32::MAX as usize) as u32;
+            if !distance_given {
+                d.add_points_distance = (f64::from(d.add_points_distance) * unit) as f32;
+            }
         }
         let schedule = plan.schedule.record(scene_scale);
         let init = match &resume {

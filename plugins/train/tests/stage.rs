@@ -228,6 +228,51 @@ fn the_default_is_cocog_with_its_starts_fitted_to_the_run() {
     );
 }
 
+/// In COLMAP's frame the point addition's volume and distance follow the camera centres'
+/// robust box; in the scene's own units they are the formula's numbers as they stand.
+#[test]
+fn the_point_addition_reads_its_constants_in_the_frame_asked_for() {
+    if !gpu_available() {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let scene_dir = ingested(tmp.path());
+    let scene = Scene::load(&scene_dir).unwrap();
+    let centres: Vec<[f64; 3]> = scene
+        .views
+        .iter()
+        .filter(|v| v.split == Split::Train)
+        .map(|v| {
+            let m = v.world_from_camera;
+            [m[0][3], m[1][3], m[2][3]]
+        })
+        .collect();
+    let unit = cocog_train::colmap_unit(&centres).unwrap();
+    let cloud = cocog_formats::ply::read_points(&scene_dir.join("points.ply")).unwrap();
+    let means: Vec<[f32; 3]> = cloud
+        .positions
+        .chunks_exact(3)
+        .map(|p| [p[0], p[1], p[2]])
+        .collect();
+    let volume = cocog_train::box_volume(&means);
+    let train = stage(cocog_train::stages(), "train");
+    for (frame, length) in [("scene", 1.0), ("colmap", unit)] {
+        let out = tmp.path().join(frame);
+        let options = json!({"iterations": 2, "downscale": 2, "sh_degree": 0, "method": "3dgs",
+            "schedule": "deblur", "add_points_frame": frame});
+        let summary = run(train.as_ref(), &scene_dir, &out, options).unwrap();
+        let s = &summary["resolved"]["schedule"];
+        assert_eq!(s["add_points_frame"], frame, "{s}");
+        let want = cocog_train::candidate_count(volume / length.powi(3), 200_000);
+        assert_eq!(s["add_points_count"], want, "{frame}: {s}");
+        let distance = s["add_points_distance"].as_f64().unwrap();
+        assert!(
+            (distance - 2.0 * length).abs() < 1e-6 * length,
+            "{frame}: {s}"
+        );
+    }
+}
+
 #[test]
 fn cocog_method_and_missing_points_are_clear_errors() {
     let tmp = tempfile::tempdir().unwrap();

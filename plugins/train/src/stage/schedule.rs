@@ -5,7 +5,7 @@ use cocog_engine::Camera;
 use cocog_pipeline::{OptionKind, OptionSpec, StageError, StageRequest};
 use serde_json::{Value, json};
 
-use crate::{DensifyConfig, TrainConfig, depth_scene_scale, scene_extent};
+use crate::{DensifyConfig, PointsFrame, TrainConfig, depth_scene_scale, scene_extent};
 
 /// Where the scene scale comes from.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -28,6 +28,8 @@ pub struct Schedule {
     pub lambda_dssim: f32,
     /// Position learning rate at the start and the end, × the scene scale.
     pub position_lr: [f64; 2],
+    /// The units of the point addition's volume rule and cut-off distance.
+    pub points_frame: PointsFrame,
 }
 
 impl Schedule {
@@ -40,6 +42,7 @@ impl Schedule {
             scale: ScaleRule::CameraExtent,
             lambda_dssim: t.lambda_dssim,
             position_lr: [t.position_lr_init, t.position_lr_final],
+            points_frame: PointsFrame::Scene,
         };
         match name {
             "inria" => Ok(inria),
@@ -152,6 +155,14 @@ impl Schedule {
             }
             d.add_points_distance = v as f32;
         }
+        if let Some(v) = o.get_str("add_points_frame") {
+            s.points_frame = PointsFrame::parse(v).ok_or_else(|| {
+                StageError::Options(format!(
+                    "stage 'train' option 'add_points_frame': unknown frame '{v}' (use colmap \
+                     or scene)"
+                ))
+            })?;
+        }
         if let Some(v) = fraction("lambda_dssim", 1.0)? {
             s.lambda_dssim = v;
         }
@@ -206,6 +217,7 @@ impl Schedule {
             "add_points_at": d.add_points_at,
             "add_points_count": d.add_points_count,
             "add_points_distance": tidy(d.add_points_distance),
+            "add_points_frame": self.points_frame.name(),
             "sh_every": self.sh_interval,
             "lambda_dssim": tidy(self.lambda_dssim),
             "position_lr": self.position_lr,
@@ -298,7 +310,15 @@ pub fn options() -> Vec<OptionSpec> {
         ),
         float(
             "add_points_distance",
-            "candidates with no Gaussian this close (scene units) are dropped (2.0)",
+            "candidates with no Gaussian this close are dropped (2.0 in add_points_frame's \
+             units; given, in scene units)",
+        ),
+        string(
+            "add_points_frame",
+            "the units the point addition's volume rule and distance are read in: colmap (the \
+             frame COLMAP's mapper leaves a reconstruction in, camera centres' robust box 10 \
+             across: the released code's data, where it adds about 200k points) or scene (this \
+             scene's own units; in metres it adds a handful) (scene)",
         ),
         float(
             "lambda_dssim",
@@ -384,13 +404,18 @@ mod tests {
             );
         }
         assert_eq!(r["scene_scale_rule"], "given");
+        assert_eq!(r["add_points_frame"], "scene");
         assert!(!s.densify.resets_opacity_at(3000));
+        let colmap = request(json!({"add_points_frame": "colmap"})).unwrap();
+        let s = Schedule::from_request(&colmap, "cocog").unwrap();
+        assert_eq!(s.record(1.0)["add_points_frame"], "colmap");
     }
 
     #[test]
     fn bad_values_are_refused_by_name() {
         for (given, name) in [
             (json!({"schedule": "fast"}), "schedule"),
+            (json!({"add_points_frame": "metres"}), "add_points_frame"),
             (json!({"scene_scale": "0"}), "scene_scale"),
             (json!({"scene_scale": "nan"}), "scene_scale"),
             (json!({"scene_scale": "median"}), "scene_scale"),
