@@ -6,11 +6,14 @@ mod common;
 
 use cocog_engine::coc::reference::{
     Base, Expanded, expand, expand_backward, gate, input, mlp_backward, mlp_forward, multiplier,
+    variant_gate,
 };
 use cocog_engine::coc::{CocConfig, CocVariant, HeadLayout, MlpLayout, init_weights};
 use common::Rng;
 
 const STEP: f64 = 1e-6;
+/// The frame's scale D: not 1, so the code variant's division by it is differentiated too.
+const SCALE: f64 = 0.7;
 
 /// A loss that weighs every output of every set differently, so no gradient hides in a sum.
 struct Probe {
@@ -115,10 +118,17 @@ impl Case {
             .sqrt()
     }
 
+    /// The gate the variant uses, and its derivative with respect to the focus distance.
+    fn gate(&self, focus: f64) -> (f64, f64) {
+        let g = gate(self.base.mean, self.camera, focus);
+        variant_gate(self.config.variant, g, SCALE)
+    }
+
     fn loss_with(&self, base: &Base, heads: &[f64], focus: f64, aperture: f64) -> f64 {
-        let (c, _) = gate(self.base.mean, self.camera, focus);
+        let (c, _) = self.gate(focus);
         let k = aperture * self.depth();
-        self.probe.loss(&expand(&self.config, base, heads, c, k))
+        self.probe
+            .loss(&expand(&self.config, base, heads, (c, k, SCALE)))
     }
 
     fn loss(&self, base: &Base, heads: &[f64], focus: f64) -> f64 {
@@ -128,13 +138,12 @@ impl Case {
     /// Every analytic gradient: weights, heads, base (as one Expanded), focus, aperture.
     fn analytic(&self) -> (Vec<f64>, Vec<f64>, Expanded, f64, f64) {
         let trace = mlp_forward(&self.ml, &self.weights, input(&self.base, self.camera));
-        let (c, dc_dfocus) = gate(self.base.mean, self.camera, self.focus);
+        let (c, dc_dfocus) = self.gate(self.focus);
         let g = expand_backward(
             &self.config,
             &self.base,
             &trace.heads,
-            c,
-            self.aperture * self.depth(),
+            (c, self.aperture * self.depth(), SCALE),
             &self.probe.coef,
         );
         let mut v_weights = vec![0.0; self.ml.len];
@@ -166,7 +175,7 @@ fn check(what: &str, analytic: f64, fd: f64) {
 /// so close to a clamp edge that a finite-difference step crosses it.
 fn assert_well_posed(case: &Case) {
     let heads = case.heads(&case.weights);
-    let (c, _) = gate(case.base.mean, case.camera, case.focus);
+    let (c, _) = case.gate(case.focus);
     let (e, top) = (std::f64::consts::E, 1.1f64.exp());
     let (mut open, mut clamped) = (0, 0);
     for &h in &heads[case.hl.scale..case.hl.len] {
@@ -287,14 +296,13 @@ fn lens_variant_matches_finite_differences() {
 fn centred_copies_average_to_the_base() {
     for variant in [CocVariant::Code, CocVariant::Paper, CocVariant::Lens] {
         let case = Case::new(variant, true, 6);
-        let (c, _) = gate(case.base.mean, case.camera, case.focus);
+        let (c, _) = case.gate(case.focus);
         assert!(c > 0.1, "the gate must be open: {c}");
         let sets = expand(
             &case.config,
             &case.base,
             &case.heads(&case.weights),
-            c,
-            case.aperture * case.depth(),
+            (c, case.aperture * case.depth(), SCALE),
         );
         let copies = &sets[..case.hl.copies];
         for k in 0..3 {
@@ -315,14 +323,13 @@ fn in_focus_gaussians_do_not_spread() {
             .map(|k| (case.base.mean[k] - case.camera[k]).powi(2))
             .sum::<f64>()
             .sqrt();
-        let (c, _) = gate(case.base.mean, case.camera, d);
+        let (c, _) = case.gate(d);
         assert!(c < 1e-12);
         let sets = expand(
             &case.config,
             &case.base,
             &case.heads(&case.weights),
-            c,
-            case.aperture * case.depth(),
+            (c, case.aperture * case.depth(), SCALE),
         );
         let n = case.base.quat.iter().map(|v| v * v).sum::<f64>().sqrt();
         for s in sets {
@@ -332,6 +339,45 @@ fn in_focus_gaussians_do_not_spread() {
             }
             for k in 0..4 {
                 assert!((s.quat[k] - case.base.quat[k] / n).abs() < 1e-12);
+            }
+        }
+    }
+}
+
+/// The code variant spreads its copies as the released code does in the scene's own units:
+/// c·raw with c = |1/d − 1/d_F| in those units, whatever frame the GPU computes in. Heads
+/// are held fixed (h_θ's inputs are the frame's, so its heads would differ).
+#[test]
+fn the_code_variants_offsets_are_in_scene_units_in_any_frame() {
+    let config = CocConfig::new(CocVariant::Code);
+    let hl = config.heads();
+    let mut rng = Rng::new(77);
+    let heads: Vec<f64> = (0..hl.len).map(|_| rng.range(-1.0, 1.0)).collect();
+    let (mean, camera, focus): ([f64; 3], [f64; 3], f64) =
+        ([0.2, -0.1, 1.9], [0.05, -0.02, -0.1], 0.9);
+    let d = (0..3)
+        .map(|k| (mean[k] - camera[k]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    let c_scene = (1.0 / d - 1.0 / focus).abs();
+    for scale in [0.25, 1.0, 3.0] {
+        let frame = |p: [f64; 3]| p.map(|v| v / scale);
+        let base = Base {
+            mean: frame(mean),
+            log_scale: [-3.0; 3],
+            quat: [1.0, 0.0, 0.0, 0.0],
+        };
+        let g = gate(base.mean, frame(camera), focus / scale);
+        let (c, _) = variant_gate(CocVariant::Code, g, scale);
+        let sets = expand(&config, &base, &heads, (c, 0.0, scale));
+        for (m, set) in sets[..hl.copies].iter().enumerate() {
+            for k in 0..3 {
+                let offset = (set.mean[k] - base.mean[k]) * scale;
+                let want = c_scene * heads[hl.pos + 3 * m + k];
+                assert!(
+                    (offset - want).abs() < 1e-12 * (1.0 + want.abs()),
+                    "scale {scale}, copy {m}, axis {k}: offset {offset} against {want}"
+                );
             }
         }
     }

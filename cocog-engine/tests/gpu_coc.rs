@@ -8,6 +8,7 @@ mod common;
 
 use cocog_engine::coc::reference::{
     Base, Expanded, MlpTrace, expand, expand_backward, gate, input, mlp_backward, mlp_forward,
+    variant_gate,
 };
 use cocog_engine::coc::{
     CAMERA_DIM, CocConfig, CocKernels, CocStep, CocVariant, MEAN_DIM, ROW_DIM, init_weights,
@@ -249,13 +250,13 @@ fn check(variant: CocVariant, centred: bool, modulate_base: bool, seed: u64) {
                 );
             }
         }
-        let (c, dc) = gate(base.mean, CAMERA, focus);
+        let (c, dc) = variant_gate(variant, gate(base.mean, CAMERA, focus), SCALE);
         let depth = (0..3)
             .map(|k| (base.mean[k] - CAMERA[k]).powi(2))
             .sum::<f64>()
             .sqrt();
         let lens_k = aperture * depth;
-        let expanded = expand(&config, base, &want.heads, c, lens_k);
+        let expanded = expand(&config, base, &want.heads, (c, lens_k, SCALE));
         for (m, e) in expanded.iter().enumerate() {
             let o = m * inp.bases.len() + i;
             for (k, w) in to_world(e.mean).into_iter().enumerate() {
@@ -287,7 +288,7 @@ fn check(variant: CocVariant, centred: bool, modulate_base: bool, seed: u64) {
                 }
             })
             .collect();
-        let g = expand_backward(&config, base, &trace.heads, c, lens_k, &v);
+        let g = expand_backward(&config, base, &trace.heads, (c, lens_k, SCALE), &v);
         open += g.v_heads.iter().filter(|v| **v != 0.0).count();
         for k in 0..3 {
             close(

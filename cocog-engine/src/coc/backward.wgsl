@@ -98,10 +98,12 @@ fn backward(
             d_heads[dh + H_POS + 3u * m + 1u] = v_raw.y;
             d_heads[dh + H_POS + 3u * m + 2u] = v_raw.z;
         } else {
-            d_heads[dh + H_POS + 3u * m] = c * g_off.x;
-            d_heads[dh + H_POS + 3u * m + 1u] = c * g_off.y;
-            d_heads[dh + H_POS + 3u * m + 2u] = c * g_off.z;
-            v_gate += dot(raw, g_off);
+            // The offset is c·raw in world units (forward.wgsl).
+            let g_world = gm - g_mean;
+            d_heads[dh + H_POS + 3u * m] = c * g_world.x;
+            d_heads[dh + H_POS + 3u * m + 1u] = c * g_world.y;
+            d_heads[dh + H_POS + 3u * m + 2u] = c * g_world.z;
+            v_gate += dot(raw, g_world);
         }
     }
     let vq = (v_unit - unit * dot(unit, v_unit)) / norm;

@@ -124,14 +124,21 @@ fn expand(
     let dist = length(mean - step.centre) / step.scale;
     let focus_distance = focus[step.view];
     let diff = 1.0 / dist - 1.0 / focus_distance;
-    let c = step.aperture * abs(diff);
+    // The code variant takes the released code's |1/d − 1/d_F| in the scene's own units (the
+    // frame's ÷ D), and its offsets c·raw in them too. Taken in the frame, as the other
+    // variants' are, its spread was D² times the released code's.
+    var gate_unit = 1.0;
+    if !(PAPER || LENS) {
+        gate_unit = step.scale;
+    }
+    let c = step.aperture * abs(diff) / gate_unit;
     var aperture_k = 0.0;
     if LENS {
         aperture_k = apertures[step.view] * dist;
     } else if PAPER {
         aperture_k = softplus(heads[h + H_APERTURE]);
     }
-    gates[g] = vec4<f32>(c, step.aperture * sign(diff) / (focus_distance * focus_distance), dist, aperture_k);
+    gates[g] = vec4<f32>(c, step.aperture * sign(diff) / (focus_distance * focus_distance * gate_unit), dist, aperture_k);
 
     // The copies' offsets (normalised), then (CENTRED) less their mean.
     var shifts: array<vec3<f32>, M>;
@@ -142,7 +149,7 @@ fn expand(
             let beta = sigmoid(heads[h + H_BETA + m]);
             shifts[m] = 0.5 * aperture_k * c * beta * raw / max(length(raw), 1e-12);
         } else {
-            shifts[m] = c * raw;
+            shifts[m] = c * raw / step.scale;
         }
         mean_shift += shifts[m] / f32(M);
     }

@@ -4,6 +4,8 @@
 //! Everything here is in the scene's normalised frame (positions and lengths divided by the
 //! scene scale D, from an origin), as the GPU computes it: h_θ then sees the same numbers in
 //! any unit, and the gate |1/d − 1/d_F| is dimensionless. The GPU maps offsets back by × D.
+//! The code variant alone works in the scene's own units, as the released code does
+//! (`variant_gate`, and `expand`'s `scale`).
 
 // Index loops mirror the formulas of method.md §3–§4.
 #![allow(clippy::needless_range_loop)]
@@ -132,6 +134,15 @@ pub fn gate(mean: [f64; 3], camera_centre: [f64; 3], focus: f64) -> (f64, f64) {
     (diff.abs(), diff.signum() / (focus * focus))
 }
 
+/// `gate`'s values as `variant` uses them, for a frame of scale D: the code variant's gate is
+/// the released code's |1/d − 1/d_F| in the scene's units, the frame's ÷ D.
+pub fn variant_gate(variant: CocVariant, gate: (f64, f64), scale: f64) -> (f64, f64) {
+    match variant {
+        CocVariant::Code => (gate.0 / scale, gate.1 / scale),
+        CocVariant::Paper | CocVariant::Lens => gate,
+    }
+}
+
 /// The multiplier δ = log(clamp(x, e, e^1.1)) ∈ [1, 1.1] of x = c·h + e − 0.01, and 1/x
 /// where unclamped (0 where clamped): ∂δ/∂h = c/x, ∂δ/∂c = h/x.
 pub fn multiplier(c: f64, h: f64) -> (f64, f64) {
@@ -164,18 +175,18 @@ fn aperture_k(variant: CocVariant, hl: &HeadLayout, heads: &[f64], lens_k: f64) 
     }
 }
 
-/// The offset of copy m < M, given the heads and the gate; `lens_k` is the lens variant's K.
+/// The offset of copy m < M, given the heads and the gate; `lens_k` is the lens variant's K,
+/// `scale` the frame's D (the code variant's offset c·raw is in scene units).
 fn offset(
     variant: CocVariant,
     hl: &HeadLayout,
     heads: &[f64],
-    c: f64,
-    lens_k: f64,
+    (c, lens_k, scale): (f64, f64, f64),
     m: usize,
 ) -> [f64; 3] {
     let raw = [0, 1, 2].map(|k| heads[hl.pos + 3 * m + k]);
     match variant {
-        CocVariant::Code => raw.map(|v| c * v),
+        CocVariant::Code => raw.map(|v| c * v / scale),
         CocVariant::Paper | CocVariant::Lens => {
             let k = aperture_k(variant, hl, heads, lens_k);
             let beta = sigmoid(heads[hl.beta.unwrap_or(0) + m]);
@@ -191,12 +202,11 @@ fn offsets(
     variant: CocVariant,
     hl: &HeadLayout,
     heads: &[f64],
-    c: f64,
-    lens_k: f64,
+    gate: (f64, f64, f64),
     centred: bool,
 ) -> Vec<[f64; 3]> {
     let mut out: Vec<[f64; 3]> = (0..hl.copies)
-        .map(|m| offset(variant, hl, heads, c, lens_k, m))
+        .map(|m| offset(variant, hl, heads, gate, m))
         .collect();
     if centred && !out.is_empty() {
         let mean = [0, 1, 2].map(|k| out.iter().map(|o| o[k]).sum::<f64>() / out.len() as f64);
@@ -220,17 +230,17 @@ fn modulation_gate(config: &CocConfig, m: usize, c: f64) -> f64 {
 }
 
 /// The M + 1 sets of one base Gaussian, copies first and the (modulated) base set last;
-/// `lens_k` is the lens variant's K = a·d (ignored by the others).
+/// `c` is `variant_gate`'s, `lens_k` the lens variant's K = a·d (ignored by the others),
+/// `scale` the frame's D.
 pub fn expand(
     config: &CocConfig,
     base: &Base,
     heads: &[f64],
-    c: f64,
-    lens_k: f64,
+    (c, lens_k, scale): (f64, f64, f64),
 ) -> Vec<Expanded> {
     let (variant, hl) = (config.variant, &config.heads());
     let (unit, _) = normalize4(base.quat);
-    let shifts = offsets(variant, hl, heads, c, lens_k, config.centred);
+    let shifts = offsets(variant, hl, heads, (c, lens_k, scale), config.centred);
     (0..=hl.copies)
         .map(|m| {
             let shift = shifts.get(m).copied().unwrap_or([0.0; 3]);
@@ -262,8 +272,7 @@ pub fn expand_backward(
     config: &CocConfig,
     base: &Base,
     heads: &[f64],
-    c: f64,
-    lens_k: f64,
+    (c, lens_k, scale): (f64, f64, f64),
     v: &[Expanded],
 ) -> ExpandGrads {
     let (variant, centred, hl) = (config.variant, config.centred, &config.heads());
@@ -310,8 +319,8 @@ pub fn expand_backward(
         match variant {
             CocVariant::Code => {
                 for k in 0..3 {
-                    v_heads[hl.pos + 3 * m + k] += c * g_off[k];
-                    v_gate += raw[k] * g_off[k];
+                    v_heads[hl.pos + 3 * m + k] += c * g_off[k] / scale;
+                    v_gate += raw[k] * g_off[k] / scale;
                 }
             }
             CocVariant::Paper | CocVariant::Lens => {
