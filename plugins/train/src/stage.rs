@@ -75,8 +75,9 @@ fn options() -> Vec<OptionSpec> {
         OptionSpec::float(
             "kernel_lr",
             1e-3,
-            "cocog: initial learning rate of h_θ, F and the focus distances, decaying 100× \
-             over the run (1e-3 in both sources; short runs learn the lens faster with more)",
+            "cocog: initial learning rate of h_θ, F and the focus distances at the blur start, \
+             decaying exponentially at 100× per run length (27× by the end of a 7000-iteration \
+             run from 2000) (1e-3 in both sources; short runs learn the lens faster with more)",
         ),
         OptionSpec::optional(
             "focus_init",
