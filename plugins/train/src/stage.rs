@@ -43,8 +43,8 @@ fn options() -> Vec<OptionSpec> {
              from 6000; the best on the dev scenes), lens (a thin lens per photo: the CoC radius \
              from that photo's learned aperture and focus, β and directions from h_θ; 5 copies \
              centred on their base, h_θ from 1000, F from 6000) or code (the released code: free \
-             offsets gated by |1/d - 1/d_F|, 4 copies, h_θ and F from 1500; breaks the base on \
-             the dev scenes); a resumed run keeps its checkpoint's. Runs shorter than 7000 \
+             offsets gated by |1/d - 1/d_F| in the scene's units, 4 copies, h_θ and F from 1500; \
+             lowers the base on the dev scenes); a resumed run keeps its checkpoint's. Runs shorter than 7000 \
              iterations start h_θ and F at the same shares of the run unless either start is \
              given",
         ),
