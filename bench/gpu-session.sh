@@ -67,7 +67,8 @@
 #                   (TESTS="NAME ..." runs only those; gpu_coop_gemm alone takes seconds)
 #   gates SET...    bench/gates.sh's quality runs at once (--jobs 12), interrupted where they would
 #                   outrun the budget; the same command again continues them (e.g. `gates
-#                   12-small 12-variants`; a phase word ends the list)
+#                   12-small 12-variants`; a phase word ends the list). With GATE_ARGS="..."
+#                   every training also gets those options, in runs of their own (g-args/)
 # #12's full-size gate, one scene per lease (F by Winograd, the default): the cocog step at
 # 400×300 took 20.3 ms on an H200 on 2026-11-27 (about 17.8 ms since, an estimate), so a
 # 30000-iteration cocog run with the 3dgs run beside it needs about 10 minutes, more than one
@@ -413,12 +414,20 @@ phase_tests() {
 }
 
 phase_gates() {
+    # GATE_ARGS (e.g. "--add-points-frame colmap") go to every training, in runs of their own:
+    # g-args/, gates-args.tgz, summary-args.tsv, so the defaults' runs stay apart.
+    local g=g extra=()
+    if [[ -n "${GATE_ARGS:-}" ]]; then
+        g=g-args
+        read -ra extra <<<"$GATE_ARGS"
+        extra=(-- "${extra[@]}")
+    fi
     # Trainings stop 60 s before the end, for their evaluations and the archive.
-    "$root/bench/gates.sh" "$work/g" "$@" --scenes "$dev/bench" --jobs 12 \
-        --deadline $(($(left) - 60)) 2>"$results/gates.err"
-    tar czf "$results/gates.tgz" -C "$work" --exclude='*.ply' --exclude='*.checkpoint' \
-        --exclude='checkpoint' --exclude='.ingest-*' g
-    cp "$work/g/summary.tsv" "$results/" 2>/dev/null
+    "$root/bench/gates.sh" "$work/$g" "$@" --scenes "$dev/bench" --jobs 12 \
+        --deadline $(($(left) - 60)) "${extra[@]}" 2>"$results/gates${g#g}.err"
+    tar czf "$results/gates${g#g}.tgz" -C "$work" --exclude='*.ply' --exclude='*.checkpoint' \
+        --exclude='checkpoint' --exclude='.ingest-*' "$g"
+    cp "$work/$g/summary.tsv" "$results/summary${g#g}.tsv" 2>/dev/null
 }
 
 # Seconds phase $1 needs to be started (what it took on an H200, with a margin), gsplat's build
