@@ -248,7 +248,7 @@ fn train_state(n: usize, sh_degree: u32) -> TrainState {
     });
     TrainState {
         iteration: 1200,
-        adam_origin: 0,
+        adam_origin: Some(0),
         views: 8,
         downscale: 4,
         params: cocog_engine::GaussianParams {

@@ -65,8 +65,9 @@ pub struct TrainState {
     /// Iterations completed.
     pub iteration: u32,
     /// The iteration whose point addition last rebuilt the Gaussians' Adam state (0: none):
-    /// their bias correction counts steps from there. Older checkpoints lack it and read 0.
-    pub adam_origin: u32,
+    /// their bias correction counts steps from there. `None` in checkpoints older than it
+    /// (the trainer then infers it from the run's schedule).
+    pub adam_origin: Option<u32>,
     /// Train views of the run; a resume must train on the same list.
     pub views: u32,
     /// Image shrink factor of the run, checked on resume (the state is resolution-specific
@@ -181,7 +182,6 @@ impl TrainState {
             ("format".to_owned(), FORMAT.to_owned()),
             ("version".to_owned(), VERSION.to_owned()),
             ("iteration".to_owned(), self.iteration.to_string()),
-            ("adam_origin".to_owned(), self.adam_origin.to_string()),
             ("views".to_owned(), self.views.to_string()),
             ("downscale".to_owned(), self.downscale.to_string()),
             ("sh_degree".to_owned(), p.sh_degree.to_string()),
@@ -190,6 +190,9 @@ impl TrainState {
             ("order_rng".to_owned(), self.order_rng.to_string()),
             ("order_stack".to_owned(), stack.join(",")),
         ]);
+        if let Some(origin) = self.adam_origin {
+            meta.insert("adam_origin".to_owned(), origin.to_string());
+        }
         meta.extend(coc_meta.into_iter().map(|(k, v)| (k.to_owned(), v)));
         let tmp = dir.join(format!(".{CHECKPOINT_FILE}.tmp"));
         safetensors::serialize_to_file(views, Some(meta), &tmp).map_err(|e| {
@@ -410,13 +413,20 @@ impl<'a> Reader<'a> {
             .map(|s| s.parse::<u32>())
             .collect::<Result<Vec<_>, _>>()
             .map_err(|_| self.fail(format!("metadata `order_stack` = {stack:?}")))?;
+        let iteration: u32 = self.number("iteration")?;
+        let adam_origin = if self.meta.contains_key("adam_origin") {
+            Some(self.number::<u32>("adam_origin")?)
+        } else {
+            None
+        };
+        if let Some(origin) = adam_origin.filter(|&o| o > iteration) {
+            return Err(self.fail(format!(
+                "metadata `adam_origin` = {origin} is past `iteration` = {iteration}"
+            )));
+        }
         Ok(TrainState {
-            iteration: self.number("iteration")?,
-            adam_origin: if self.meta.contains_key("adam_origin") {
-                self.number("adam_origin")?
-            } else {
-                0
-            },
+            iteration,
+            adam_origin,
             views: self.number("views")?,
             downscale: self.number("downscale")?,
             params,
@@ -441,7 +451,7 @@ mod tests {
         let seq = |len: usize, at: f32| (0..len).map(|i| at + i as f32 * 0.5).collect::<Vec<_>>();
         TrainState {
             iteration: 1234,
-            adam_origin: 1000,
+            adam_origin: Some(1000),
             views: 21,
             downscale: 4,
             params: GaussianParams {
@@ -537,5 +547,15 @@ mod tests {
         s.save(dir.path()).unwrap();
         let short = TrainState::load(&file).unwrap_err().to_string();
         assert!(short.contains("params.sh"), "{short}");
+        // An optimizer rebuilt after the checkpoint's own iteration cannot be.
+        let mut s = state();
+        s.adam_origin = Some(s.iteration + 1);
+        s.save(dir.path()).unwrap();
+        let late = TrainState::load(&file).unwrap_err().to_string();
+        assert!(late.contains("adam_origin"), "{late}");
+        // Older checkpoints have no origin at all, and read as such.
+        s.adam_origin = None;
+        s.save(dir.path()).unwrap();
+        assert_eq!(TrainState::load(&file).unwrap().adam_origin, None);
     }
 }

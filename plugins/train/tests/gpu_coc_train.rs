@@ -602,7 +602,13 @@ fn the_point_addition_grows_and_reinitialises_the_set_mid_run() {
     // count the same way.
     let state = trainer.snapshot(1).unwrap();
     let mut resumed = Trainer::resume(ctx, &state, &scene.train, config.clone()).unwrap();
-    for t in [&mut trainer, &mut resumed] {
+    // A checkpoint from before the origin was saved: the schedule says the rebuild happened.
+    let older = cocog_train::TrainState {
+        adam_origin: None,
+        ..state.clone()
+    };
+    let mut inferred = Trainer::resume(ctx, &older, &scene.train, config.clone()).unwrap();
+    for t in [&mut trainer, &mut resumed, &mut inferred] {
         t.step().unwrap();
         first_update_is_the_learning_rate(&g.opacity_logits, &t.gaussians().unwrap(), &config);
     }

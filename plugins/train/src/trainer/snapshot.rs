@@ -42,7 +42,7 @@ impl<'c> Trainer<'c> {
         let (order_rng, stack) = self.order.state();
         Ok(TrainState {
             iteration: self.iteration,
-            adam_origin: self.adam_origin,
+            adam_origin: Some(self.adam_origin),
             views: self.targets.len() as u32,
             downscale,
             params: self.gaussians()?,
@@ -109,7 +109,15 @@ impl<'c> Trainer<'c> {
                 state.order_stack.iter().map(|&v| v as usize).collect(),
             ),
             iteration: state.iteration,
-            adam_origin: state.adam_origin,
+            // Older checkpoints: the addition happened if the schedule's iteration is past.
+            adam_origin: state.adam_origin.unwrap_or_else(|| {
+                config
+                    .densify
+                    .as_ref()
+                    .map(|d| d.add_points_at)
+                    .filter(|&at| at > 0 && at <= state.iteration)
+                    .unwrap_or(0)
+            }),
             params,
             coc: state.coc.clone(),
         };
