@@ -25,7 +25,9 @@ const RATE: f64 = 1.1;
 /// metres the same formula draws a handful.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum PointsFrame {
-    /// COLMAP's normalised frame, from the training cameras (`colmap_unit`).
+    /// COLMAP's normalised frame, from the scene's cameras, held-out views included
+    /// (`colmap_unit`). COLMAP 3.x's mapper normalises this way; newer mappers may keep the
+    /// scale, but the released code's data (2023) are older.
     Colmap,
     /// The scene's own units, whatever they are.
     Scene,

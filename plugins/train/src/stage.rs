@@ -44,7 +44,7 @@ fn options() -> Vec<OptionSpec> {
              from that photo's learned aperture and focus, β and directions from h_θ; 5 copies \
              centred on their base, h_θ from 1000, F from 6000) or code (the released code: free \
              offsets gated by |1/d - 1/d_F| in the scene's units, 4 copies, h_θ and F from 1500; \
-             lowers the base on the dev scenes); a resumed run keeps its checkpoint's. Runs shorter than 7000 \
+             on dev-table its first 100 blurred steps cost the base 2 dB); a resumed run keeps its checkpoint's. Runs shorter than 7000 \
              iterations start h_θ and F at the same shares of the run unless either start is \
              given",
         ),
@@ -461,8 +461,16 @@ impl Stage for Train {
             .map_err(|e| StageError::Input(format!("{}: {e}", req.input.display())))?;
         plan.config.scene_scale = Some(scene_scale);
         // The addition's size follows the initial cloud (method.md §8.1), also when resuming,
-        // measured in the frame the rule's constants are meant for.
-        let centres: Vec<[f64; 3]> = cameras.iter().map(cocog_engine::Camera::centre).collect();
+        // measured in the frame the rule's constants are meant for. COLMAP's mapper normalises
+        // over every registered image, the held-out ones too.
+        let centres: Vec<[f64; 3]> = scene
+            .views
+            .iter()
+            .map(|v| {
+                let m = &v.world_from_camera;
+                [m[0][3], m[1][3], m[2][3]]
+            })
+            .collect();
         let unit = plan.schedule.points_frame.unit(&centres);
         let volume = crate::box_volume(&points.means) / unit.powi(3);
         let distance_given = req.options.get_f64("add_points_distance").is_some();

@@ -238,10 +238,10 @@ fn the_point_addition_reads_its_constants_in_the_frame_asked_for() {
     let tmp = tempfile::tempdir().unwrap();
     let scene_dir = ingested(tmp.path());
     let scene = Scene::load(&scene_dir).unwrap();
+    // Every view, as COLMAP's mapper normalises over every registered image.
     let centres: Vec<[f64; 3]> = scene
         .views
         .iter()
-        .filter(|v| v.split == Split::Train)
         .map(|v| {
             let m = v.world_from_camera;
             [m[0][3], m[1][3], m[2][3]]
