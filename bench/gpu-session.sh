@@ -420,11 +420,11 @@ phase_gates() {
     if [[ -n "${GATE_ARGS:-}" ]]; then
         g=g-args
         read -ra extra <<<"$GATE_ARGS"
-        extra=(-- "${extra[@]}")
+        extra=(-- ${extra[@]+"${extra[@]}"})
     fi
     # Trainings stop 60 s before the end, for their evaluations and the archive.
     "$root/bench/gates.sh" "$work/$g" "$@" --scenes "$dev/bench" --jobs 12 \
-        --deadline $(($(left) - 60)) "${extra[@]}" 2>"$results/gates${g#g}.err"
+        --deadline $(($(left) - 60)) ${extra[@]+"${extra[@]}"} 2>"$results/gates${g#g}.err"
     tar czf "$results/gates${g#g}.tgz" -C "$work" --exclude='*.ply' --exclude='*.checkpoint' \
         --exclude='checkpoint' --exclude='.ingest-*' "$g"
     cp "$work/$g/summary.tsv" "$results/summary${g#g}.tsv" 2>/dev/null
