@@ -287,6 +287,9 @@ mod tests {
             .map(|i| [((i * 7) % 11) as f64, 2.0, -1.0])
             .collect();
         assert!((colmap_unit(&line).unwrap() - 0.8).abs() < 1e-12);
+        // Ten uneven centres: indices ⌊0.1·9⌋ = 0 and ⌊0.9·9⌋ = 8, so 0 and 64 → 6.4.
+        let uneven: Vec<[f64; 3]> = (0..10).map(|i| [(i * i) as f64, 0.0, 0.0]).collect();
+        assert!((colmap_unit(&uneven).unwrap() - 6.4).abs() < 1e-12);
         // A diagonal: 3-4-0 per step, so the box's diagonal is 5 per step between them.
         let diag: Vec<[f64; 3]> = (0..21)
             .map(|i| [3.0 * i as f64, 4.0 * i as f64, 0.0])
