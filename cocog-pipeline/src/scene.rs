@@ -82,6 +82,14 @@ pub struct View {
     pub depth: Option<String>,
 }
 
+impl View {
+    /// The camera centre in world coordinates: `world_from_camera`'s translation.
+    pub fn centre(&self) -> [f64; 3] {
+        let m = &self.world_from_camera;
+        [m[0][3], m[1][3], m[2][3]]
+    }
+}
+
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Bounds {
     /// Nearest and farthest scene depth over all views (LLFF bounds or from points).

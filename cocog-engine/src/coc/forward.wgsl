@@ -127,10 +127,7 @@ fn expand(
     // The code variant takes the released code's |1/d − 1/d_F| in the scene's own units (the
     // frame's ÷ D), and its offsets c·raw in them too. Taken in the frame, as the other
     // variants' are, its spread was D² times the released code's.
-    var gate_unit = 1.0;
-    if !(PAPER || LENS) {
-        gate_unit = step.scale;
-    }
+    let gate_unit = select(step.scale, 1.0, PAPER || LENS);
     let c = step.aperture * abs(diff) / gate_unit;
     var aperture_k = 0.0;
     if LENS {

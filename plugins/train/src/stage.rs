@@ -463,14 +463,7 @@ impl Stage for Train {
         // The addition's size follows the initial cloud (method.md §8.1), also when resuming,
         // measured in the frame the rule's constants are meant for. COLMAP's mapper normalises
         // over every registered image, the held-out ones too.
-        let centres: Vec<[f64; 3]> = scene
-            .views
-            .iter()
-            .map(|v| {
-                let m = &v.world_from_camera;
-                [m[0][3], m[1][3], m[2][3]]
-            })
-            .collect();
+        let centres: Vec<[f64; 3]> = scene.views.iter().map(|v| v.centre()).collect();
         let unit = plan.schedule.points_frame.unit(&centres);
         let volume = crate::box_volume(&points.means) / unit.powi(3);
         let distance_given = req.options.get_f64("add_points_distance").is_some();

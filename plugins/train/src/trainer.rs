@@ -627,8 +627,7 @@ impl<'c> Trainer<'c> {
         }
         if let Some(d) = d.as_ref().filter(|d| d.adds_points_at(it)) {
             let before = self.num_gaussians();
-            self.add_points(d)?;
-            self.adam_origin = it;
+            self.add_points(d, it)?;
             self.grow_capacity_with(before);
         }
         if plan.reset_opacity && !reset_in_step {

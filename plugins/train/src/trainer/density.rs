@@ -256,11 +256,15 @@ impl<'c> Trainer<'c> {
     }
 
     /// Deblurring 3DGS's point addition (method.md §8.1): new Gaussians, every shape
-    /// re-initialised, Gaussian Adam moments and statistics restarted, and (in `step`) Adam's
-    /// step count with them: the released code rebuilds its optimizer here. h_θ, F and the focus distances keep their moments: that
+    /// re-initialised, Gaussian Adam moments, step count and statistics restarted after `it`:
+    /// the released code rebuilds its optimizer here. h_θ, F and the focus distances keep their moments: that
     /// they restart there is a side effect of one optimizer holding everything. Returns how
     /// many points were added.
-    pub(super) fn add_points(&mut self, config: &DensifyConfig) -> Result<usize, TrainError> {
+    pub(super) fn add_points(
+        &mut self,
+        config: &DensifyConfig,
+        it: u32,
+    ) -> Result<usize, TrainError> {
         self.settle()?;
         let ctx = self.ctx;
         let g = self.gaussians()?;
@@ -277,6 +281,7 @@ impl<'c> Trainer<'c> {
         let params = ParamBuffers::upload(ctx, &[&dense])?;
         self.stats.reset(ctx, params.num_gaussians);
         self.moments = Moments::new(ctx, &params);
+        self.adam_origin = it;
         *self.params_mut()? = params;
         Ok(added)
     }
