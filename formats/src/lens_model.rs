@@ -10,6 +10,28 @@ use safetensors::{Dtype, SafeTensors, tensor::TensorView};
 
 const FORMAT: &str = "cocog.lens-model";
 const VERSION: &str = "1";
+/// Metadata key and value marking h_θ's weights as trained with the `code` variant's gate and
+/// offsets in scene units (since 76cd3bc; before, the max-depth frame spread the copies D²
+/// times as wide). Lens models and checkpoints both carry it.
+pub const COC_UNITS_KEY: &str = "coc_units";
+pub const COC_UNITS: &str = "scene";
+
+/// Why h_θ's weights of `variant`, in a file whose `coc_units` metadata is `units`, cannot be
+/// used: a `code` variant file without the mark holds weights for the old meaning, which would
+/// render and train wrong without a word. The other variants' weights kept their meaning.
+pub fn coc_units_problem(variant: &str, units: Option<&str>) -> Option<String> {
+    match units {
+        Some(COC_UNITS) => None,
+        None if variant != "code" => None,
+        None => Some(format!(
+            "a `code` variant file from before its offsets were in scene units (no metadata \
+             `{COC_UNITS_KEY}`); its h_θ would spread the CoC copies wrongly: train it again"
+        )),
+        Some(other) => Some(format!(
+            "metadata `{COC_UNITS_KEY}` = {other:?}; this cocog reads {COC_UNITS:?}"
+        )),
+    }
+}
 
 /// The lens model and the layout its weights follow.
 #[derive(Clone, Debug, PartialEq)]
@@ -80,6 +102,7 @@ impl LensModel {
             ("format".to_owned(), FORMAT.to_owned()),
             ("version".to_owned(), VERSION.to_owned()),
             ("variant".to_owned(), self.variant.clone()),
+            (COC_UNITS_KEY.to_owned(), COC_UNITS.to_owned()),
             ("copies".to_owned(), self.copies.to_string()),
             ("width".to_owned(), self.width.to_string()),
             ("centred".to_owned(), self.centred.to_string()),
@@ -156,6 +179,11 @@ impl LensModel {
             "false" => Ok(false),
             other => Err(fail(format!("metadata `{key}` = {other:?}"))),
         };
+        let variant = text("variant")?;
+        if let Some(why) = coc_units_problem(&variant, meta.get(COC_UNITS_KEY).map(String::as_str))
+        {
+            return Err(fail(why));
+        }
         let centred = flag("centred")?;
         let modulate_base = flag("modulate_base")?;
         let compositor_trained = match meta.get("compositor_trained") {
@@ -177,7 +205,7 @@ impl LensModel {
             origin,
             scale,
             apertures: floats("apertures")?,
-            variant: text("variant")?,
+            variant,
             copies: number("copies")?,
             width: number("width")?,
             centred,
@@ -244,5 +272,44 @@ mod tests {
         m.save(&path).unwrap();
         let e = LensModel::load(&path).unwrap_err().to_string();
         assert!(e.contains("focus_distances") && e.contains("NaN"), "{e}");
+    }
+
+    /// `path` written again with its metadata changed by `edit`.
+    fn rewrite_meta(path: &Path, edit: impl FnOnce(&mut HashMap<String, String>)) {
+        let data = std::fs::read(path).unwrap();
+        let st = SafeTensors::deserialize(&data).unwrap();
+        let (_, header) = SafeTensors::read_metadata(&data).unwrap();
+        let mut meta = header.metadata().clone().unwrap();
+        edit(&mut meta);
+        let views: Vec<_> = st.tensors();
+        safetensors::serialize_to_file(views, Some(meta), path).unwrap();
+    }
+
+    #[test]
+    fn a_code_variant_model_without_its_units_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("lens-model.safetensors");
+        model().save(&path).unwrap();
+        rewrite_meta(&path, |m| {
+            m.remove("coc_units");
+        });
+        let e = LensModel::load(&path).unwrap_err().to_string();
+        assert!(
+            e.contains("coc_units") && e.contains("train it again"),
+            "{e}"
+        );
+        // The other variants' weights kept their meaning, so their older files still load.
+        let mut paper = model();
+        paper.variant = "paper".into();
+        paper.save(&path).unwrap();
+        rewrite_meta(&path, |m| {
+            m.remove("coc_units");
+        });
+        assert_eq!(LensModel::load(&path).unwrap(), paper);
+        rewrite_meta(&path, |m| {
+            m.insert("coc_units".into(), "max-depth".into());
+        });
+        let e = LensModel::load(&path).unwrap_err().to_string();
+        assert!(e.contains("\"max-depth\""), "{e}");
     }
 }

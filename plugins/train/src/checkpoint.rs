@@ -9,6 +9,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use cocog_engine::GaussianParams;
+use cocog_formats::lens_model::{COC_UNITS, COC_UNITS_KEY, coc_units_problem};
 use safetensors::{Dtype, SafeTensors, tensor::TensorView};
 
 /// File name inside a checkpoint directory.
@@ -146,6 +147,7 @@ impl TrainState {
             ));
             coc_meta.extend([
                 ("coc_variant", c.variant.clone()),
+                (COC_UNITS_KEY, COC_UNITS.to_owned()),
                 ("coc_copies", c.copies.to_string()),
                 ("coc_width", c.width.to_string()),
                 ("coc_centred", c.centred.to_string()),
@@ -308,6 +310,10 @@ impl<'a> Reader<'a> {
         let Some(variant) = self.meta.get("coc_variant") else {
             return Ok(None);
         };
+        let units = self.meta.get(COC_UNITS_KEY).map(String::as_str);
+        if let Some(why) = coc_units_problem(variant, units) {
+            return Err(self.fail(why));
+        }
         let (mlp, mlp_moments) = self.with_moments("coc.mlp", "coc_mlp")?;
         let (compositor, compositor_moments) =
             self.with_moments("coc.compositor", "coc_compositor")?;
@@ -557,5 +563,28 @@ mod tests {
         s.adam_origin = None;
         s.save(dir.path()).unwrap();
         assert_eq!(TrainState::load(&file).unwrap().adam_origin, None);
+    }
+
+    #[test]
+    fn a_code_variant_checkpoint_without_its_units_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut s = state();
+        let mut coc = lens_model();
+        coc.variant = "code".into();
+        s.coc = Some(coc);
+        let file = s.save(dir.path()).unwrap();
+        assert_eq!(TrainState::load(&file).unwrap(), s);
+        // The same file as a build before the mark wrote it.
+        let data = std::fs::read(&file).unwrap();
+        let st = SafeTensors::deserialize(&data).unwrap();
+        let (_, header) = SafeTensors::read_metadata(&data).unwrap();
+        let mut meta = header.metadata().clone().unwrap();
+        meta.remove(COC_UNITS_KEY);
+        safetensors::serialize_to_file(st.tensors(), Some(meta), &file).unwrap();
+        let e = TrainState::load(&file).unwrap_err().to_string();
+        assert!(
+            e.contains(COC_UNITS_KEY) && e.contains("train it again"),
+            "{e}"
+        );
     }
 }
