@@ -420,11 +420,11 @@ impl<'a> Reader<'a> {
             .collect::<Result<Vec<_>, _>>()
             .map_err(|_| self.fail(format!("metadata `order_stack` = {stack:?}")))?;
         let iteration: u32 = self.number("iteration")?;
-        let adam_origin = if self.meta.contains_key("adam_origin") {
-            Some(self.number::<u32>("adam_origin")?)
-        } else {
-            None
-        };
+        let adam_origin: Option<u32> = self
+            .meta
+            .contains_key("adam_origin")
+            .then(|| self.number("adam_origin"))
+            .transpose()?;
         if let Some(origin) = adam_origin.filter(|&o| o > iteration) {
             return Err(self.fail(format!(
                 "metadata `adam_origin` = {origin} is past `iteration` = {iteration}"

@@ -44,9 +44,9 @@ fn options() -> Vec<OptionSpec> {
              from that photo's learned aperture and focus, β and directions from h_θ; 5 copies \
              centred on their base, h_θ from 1000, F from 6000) or code (the released code: free \
              offsets gated by |1/d - 1/d_F| in the scene's units, 4 copies, h_θ and F from 1500; \
-             on dev-table its first 100 blurred steps cost the base 2 dB); a resumed run keeps its checkpoint's. Runs shorter than 7000 \
-             iterations start h_θ and F at the same shares of the run unless either start is \
-             given",
+             on dev-table its first 100 blurred steps cost the base 2 dB); a resumed run keeps \
+             its checkpoint's. Runs shorter than 7000 iterations start h_θ and F at the same \
+             shares of the run unless either start is given",
         ),
         OptionSpec::int(
             "blur_start",

@@ -257,9 +257,9 @@ impl<'c> Trainer<'c> {
 
     /// Deblurring 3DGS's point addition (method.md §8.1): new Gaussians, every shape
     /// re-initialised, Gaussian Adam moments, step count and statistics restarted after `it`:
-    /// the released code rebuilds its optimizer here. h_θ, F and the focus distances keep their moments: that
-    /// they restart there is a side effect of one optimizer holding everything. Returns how
-    /// many points were added.
+    /// the released code rebuilds its optimizer here. h_θ, F and the focus distances keep
+    /// their moments: that they restart there is a side effect of one optimizer holding
+    /// everything. Returns how many points were added.
     pub(super) fn add_points(
         &mut self,
         config: &DensifyConfig,
