@@ -27,19 +27,20 @@
 #                   (the default variant, F on) on them, the latter with F's convolutions as
 #                   implicit GEMMs (COCOG_F_CONV=gemm), as tiled kernels (COCOG_F_CONV=tiled)
 #                   and with its 3×3 layers by Winograd (the default), that with the first
-#                   layer's forward by its own kernel (COCOG_F_FIRST=direct), and with F's maps
+#                   layer's forward as an implicit GEMM (COCOG_F_FIRST=gemm; a GPU's default
+#                   runs it by its own kernel), and with F's maps
 #                   in f32 (COCOG_NO_F16=1) as well as f16, with the per-kernel split
 #                   (--kernels), and on tensor cores (COCOG_F_CONV=coop, f16 operands,
 #                   experimental), and both steps compositing in 8×8 blocks on both sides
 #                   (COCOG_RASTER_BLOCK=8), in 16×16 tiles on both sides (=16; by default
 #                   the forward takes 8×8 blocks below 2048 tiles, the backward tiles) or with the backward's tile
 #                   lists whole (COCOG_RASTER_SPLIT=1; a GPU's default splits them), or
-#                   taking wide rows of each Gaussian's rectangle as spans (COCOG_TILE_SPANS=1;
-#                   by default every tile is tested); then at
-#                   400×300 on the same Gaussians the 3dgs
-#                   step (each of those settings, and 4 chunks) and the cocog step (what a step
-#                   of #12's full-size gate costs), F on the f32 products, by Winograd and on
-#                   tensor cores in the default block layout  ~105 s on an H200 (an estimate)
+#                   testing every tile of each Gaussian's rectangle (COCOG_TILE_SPANS=0; a
+#                   GPU's default takes its wide rows as spans); then at 400×300 on the same
+#                   Gaussians the 3dgs step (each of those settings, and 4 chunks) and the cocog
+#                   step (what a step of #12's full-size gate costs), F on the f32 products, by
+#                   Winograd with either first layer and on tensor cores in the default block
+#                   layout                                  ~50 s on an H100 (2026-11-28)
 #   layouts         the cocog step at 400×300 with F on tensor cores in each other block layout
 #                   (COCOG_COOP_BLOCK: wider blocks, deeper slices, prefetching, skewed rows)
 #                   on step's Gaussians (trained first where step has not run on the machine);
@@ -68,7 +69,8 @@
 #   gates SET...    bench/gates.sh's quality runs at once (--jobs 12), interrupted where they would
 #                   outrun the budget; the same command again continues them (e.g. `gates
 #                   12-small 12-variants`; a phase word ends the list). With GATE_ARGS="..."
-#                   every training also gets those options, in runs of their own (g-args/)
+#                   every training also gets those options, in runs of their own named after
+#                   them (g-add-points-frame-colmap/, gates-add-points-frame-colmap.tgz)
 # #12's full-size gate, one scene per lease (F by Winograd, the default): the cocog step at
 # 400×300 took 20.3 ms on an H200 on 2026-11-27 (about 17.8 ms since, an estimate), so a
 # 30000-iteration cocog run with the 3dgs run beside it needs about 10 minutes, more than one
@@ -220,13 +222,13 @@ phase_step() {
     local model
     model=$(step_model) || return 1
     local m vars
-    for m in 3dgs cocog cocog-tiled cocog-winograd cocog-direct cocog-f32 cocog-coop 3dgs-b8 cocog-b8 3dgs-b16 cocog-b16 3dgs-whole cocog-whole 3dgs-spans cocog-spans; do
+    for m in 3dgs cocog cocog-tiled cocog-winograd cocog-fgemm cocog-f32 cocog-coop 3dgs-b8 cocog-b8 3dgs-b16 cocog-b16 3dgs-whole cocog-whole 3dgs-scan cocog-scan; do
         echo "-- $m step on the model's Gaussians" >>"$log"
         vars=(COCOG_F_CONV=gemm)  # the rows named cocog-winograd time the default
         [[ $m == *-tiled ]] && vars=(COCOG_F_CONV=tiled)
         [[ $m == *-winograd ]] && vars=(COCOG_F_CONV=winograd)
-        # The default's first layer forward by its own kernel instead of an implicit GEMM.
-        [[ $m == *-direct ]] && vars=(COCOG_F_CONV=winograd COCOG_F_FIRST=direct)
+        # The default's first layer forward as an implicit GEMM (a GPU's default: its own kernel).
+        [[ $m == *-fgemm ]] && vars=(COCOG_F_CONV=winograd COCOG_F_FIRST=gemm)
         [[ $m == *-coop ]] && vars=(COCOG_F_CONV=coop COCOG_COOPERATIVE_MATRIX=1)
         [[ $m == *-f32 ]] && vars+=(COCOG_NO_F16=1)
         # Compositing in 8×8 blocks of a tile, the backward too (the default forward's on
@@ -235,8 +237,9 @@ phase_step() {
         [[ $m == *-b16 ]] && vars+=(COCOG_RASTER_BLOCK=16)
         # The compositing backward walking each tile's list whole (a GPU's default splits them).
         [[ $m == *-whole ]] && vars+=(COCOG_RASTER_SPLIT=1)
-        # Wide rows of each Gaussian's rectangle as spans (by default every tile is tested).
-        [[ $m == *-spans ]] && vars+=(COCOG_TILE_SPANS=1)
+        # Every tile of each Gaussian's rectangle tested (a GPU's default takes wide rows as
+        # spans).
+        [[ $m == *-scan ]] && vars+=(COCOG_TILE_SPANS=0)
         bounded 60 "${clean_env[@]}" "${vars[@]}" "$cocog" bench "$work/in-dev-table" --downscale 4 \
             --resume "$model" --method "${m%%-*}" --iterations 100 --warmup 10 --kernels \
             >>"$log" 2>&1
@@ -303,10 +306,10 @@ phase_peer_synthetic() {
 # The compositing settings the benches compare: whole tile lists in the backward, 8×8 blocks
 # on both sides, 16×16 tiles on both sides (by default the forward takes 8×8 blocks below 2048
 # tiles), tile lists split (as many chunks as RasterSplit::Auto picks, a GPU's default, and 4),
-# and the projection and key emission taking a rectangle's wide rows as spans (by default they
-# test every tile).
+# and the projection and key emission testing every tile of a rectangle (a GPU's default takes
+# its wide rows as spans).
 raster_settings=("COCOG_RASTER_SPLIT=1" "COCOG_RASTER_BLOCK=8" "COCOG_RASTER_BLOCK=16"
-    "COCOG_RASTER_SPLIT=auto" "COCOG_RASTER_SPLIT=4" "COCOG_TILE_SPANS=1")
+    "COCOG_RASTER_SPLIT=auto" "COCOG_RASTER_SPLIT=4" "COCOG_TILE_SPANS=0")
 
 # cocog's side of peer-train: sharp-dev at 400×300, 30000 iterations of 3dgs, timed, then scored.
 train_sharp_dev() {
@@ -414,11 +417,13 @@ phase_tests() {
 }
 
 phase_gates() {
-    # GATE_ARGS (e.g. "--add-points-frame colmap") go to every training, in runs of their own:
-    # g-args/, gates-args.tgz, summary-args.tsv, so the defaults' runs stay apart.
+    # GATE_ARGS (e.g. "--add-points-frame colmap") go to every training, in runs of their own
+    # named after them (g-add-points-frame-colmap/, gates-add-points-frame-colmap.tgz,
+    # summary-add-points-frame-colmap.tsv), so the defaults' runs and another call's options
+    # stay apart: a second call with other options does not find the first's runs finished.
     local g=g extra=()
     if [[ -n "${GATE_ARGS:-}" ]]; then
-        g=g-args
+        g=g-$(printf '%s' "$GATE_ARGS" | tr -cs 'A-Za-z0-9.' '-' | sed 's/^-*//; s/-*$//')
         read -ra extra <<<"$GATE_ARGS"
         extra=(-- ${extra[@]+"${extra[@]}"})
     fi

@@ -192,6 +192,24 @@ fn tile_culling_drops_intersections_without_changing_pixels() {
     }
 }
 
+/// Spans by default on a GPU, where they halved the binning kernels at 400×300 on an H100,
+/// and the scan on a CPU adapter, where spans cost (BENCHMARKS.md, session 42).
+#[test]
+fn tile_spans_default_by_adapter() {
+    let Some(ctx) = gpu() else { return };
+    if std::env::var_os("COCOG_TILE_SPANS").is_some() {
+        eprintln!("skipped: COCOG_TILE_SPANS is set");
+        return;
+    }
+    assert_eq!(Renderer::new(ctx).tile_spans(), !ctx.is_cpu());
+    for spans in [false, true] {
+        assert_eq!(
+            Renderer::new(ctx).with_tile_spans(ctx, spans).tile_spans(),
+            spans
+        );
+    }
+}
+
 /// Elongated Gaussians, their opacity logits lowered by `fainter`: their 3σ boxes cover many
 /// tiles they never reach. (On the wide frame, as faint as on the small one, a few pixels meet
 /// a Gaussian at exactly 1/255 alpha, which the f32 and f64 cut-offs decide apart.)

@@ -400,6 +400,18 @@ fn gpu_case_on(
     stored
 }
 
+/// The first layer's forward by its own kernel by default on a GPU, where it beat the implicit
+/// GEMM on an H100, and as the GEMM on a CPU adapter, where it is the slower (session 42).
+#[test]
+fn gpu_first_layer_forward_defaults_by_adapter() {
+    let Some(ctx) = test_gpu() else { return };
+    if std::env::var_os("COCOG_F_FIRST").is_some() {
+        eprintln!("skipped: COCOG_F_FIRST is set");
+        return;
+    }
+    assert_eq!(cocog_engine::nn::direct_first_forward(ctx), !ctx.is_cpu());
+}
+
 #[test]
 fn gpu_learned_mode_matches_the_reference() {
     gpu_case(CompositeMode::Learned, 8, 3, 7, 9, 5);

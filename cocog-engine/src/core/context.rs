@@ -303,6 +303,12 @@ impl GpuContext {
         shapes(&self.cooperative_matrices)
     }
 
+    /// Whether the adapter is a CPU (lavapipe, WARP): the kernels that pay off on a GPU's
+    /// many cores and lose on a few CPU threads default by this.
+    pub fn is_cpu(&self) -> bool {
+        self.adapter_info.device_type == wgpu::DeviceType::Cpu
+    }
+
     /// "name (backend, device type)", for logs and benchmark reports.
     pub fn adapter_name(&self) -> String {
         let i = &self.adapter_info;

@@ -263,7 +263,7 @@ impl Compositor {
                         "first_forward",
                         "conv first forward (direct)",
                     ),
-                    direct: FirstLayer::direct_forward(),
+                    direct: direct_first_forward(ctx),
                     weight_part: Kernel::labelled(
                         ctx,
                         &m,
@@ -789,25 +789,6 @@ impl FirstLayer {
     const FORWARD_CHANNELS: u32 = 32;
     const FORWARD_BLOCK: (u32, u32) = (32, 4);
 
-    /// The direct forward with `COCOG_F_FIRST=direct`, a switch for timing it against the
-    /// implicit GEMM on a GPU before it becomes the default. On an H200 the GEMM took 0.367 ms
-    /// at 100×75 and 0.98 ms at 400×300 (six renders), some 2 % of the GPU's f32 rate: each
-    /// element of its im2col tile pays a division, a bounds test and a gather. On lavapipe the
-    /// direct kernel is the slower (120 against 81 ms at 100×75), which says little of a GPU,
-    /// where its weights are broadcast from workgroup memory. One pixel per invocation with its
-    /// 75 inputs in a local array took 5.5 ms at 400×300 on the H200, so this one keeps its
-    /// sums in named variables.
-    fn direct_forward() -> bool {
-        match std::env::var("COCOG_F_FIRST").as_deref() {
-            Ok("direct") => true,
-            Ok("gemm") | Err(_) => false,
-            Ok(other) => {
-                eprintln!("COCOG_F_FIRST={other}: expected gemm or direct; gemm it is");
-                false
-            }
-        }
-    }
-
     /// The layer's output channels; its kernels take F's 5×5 rgb layer alone.
     fn checked(layer: ConvLayer) -> u32 {
         let (cin, cout, k, _, _) = layer;
@@ -914,4 +895,28 @@ fn chunks(w: u32, h: u32, images: u32, chunk: u32) -> impl Iterator<Item = MapSi
             images: chunk.min(images - image0),
             image0,
         })
+}
+
+/// Whether F's first layer's forward (under `ConvPath::Winograd`) runs as its own direct
+/// kernel: `COCOG_F_FIRST=direct` or `gemm` where set, else direct on a GPU and the implicit
+/// GEMM on a CPU adapter. The GEMM's im2col tile pays a division, a bounds test and a gather
+/// per element (about 2 % of an H200's f32 rate); the direct kernel broadcasts its weights
+/// from workgroup memory. On an H100 (2026-11-28, six renders) it took 0.660 ms at 400×300 against the GEMM's 1.140
+/// (the cocog step 16.4 against 17.0 ms) and 0.075 against 0.091 at 100×75. On lavapipe it
+/// is the slower (120 against 81 ms at 100×75). One pixel per invocation with its 75 inputs
+/// in a local array took 5.5 ms at 400×300 on an H200, so this one keeps its sums in named
+/// variables.
+pub fn direct_first_forward(ctx: &GpuContext) -> bool {
+    let default = !ctx.is_cpu();
+    match std::env::var("COCOG_F_FIRST").as_deref() {
+        Ok("direct") => true,
+        Ok("gemm") => false,
+        Err(_) | Ok("") => default,
+        Ok(other) => {
+            eprintln!(
+                "COCOG_F_FIRST={other}: expected gemm or direct; the adapter's default stays"
+            );
+            default
+        }
+    }
 }

@@ -18,6 +18,8 @@ mod layout;
 mod precision;
 pub mod reference;
 
-pub use composite::{CompositeGrads, CompositeMode, CompositeOutput, Compositor, ConvPath};
+pub use composite::{
+    CompositeGrads, CompositeMode, CompositeOutput, Compositor, ConvPath, direct_first_forward,
+};
 pub use layout::{CompositorConfig, CompositorLayout, IN_EPS};
 pub use precision::MapPrecision;

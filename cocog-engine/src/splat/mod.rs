@@ -11,7 +11,7 @@ pub use batch::{
 };
 pub use frame::Frame;
 pub use renderer::{
-    FINITE_WGSL, MAX_SPLIT, QUAT_TO_ROT_WGSL, RasterBlocks, RasterSplit, Renderer, SPLIT_TARGET,
-    raster_split_for,
+    FINITE_WGSL, MAX_SPLIT, QUAT_TO_ROT_WGSL, RasterBlocks, RasterSplit, Renderer, SCAN_WIDTH,
+    SPLIT_TARGET, raster_split_for,
 };
 pub use state::{ForwardState, Gradients, RenderedImage};

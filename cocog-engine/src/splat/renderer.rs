@@ -80,6 +80,8 @@ pub struct Renderer {
     blocks: RasterBlocks,
     /// How many chunks the compositing backward splits each tile's list into.
     raster_split: RasterSplit,
+    /// Whether the binning kernels take wide rows as spans.
+    tile_spans: bool,
 }
 
 /// How many workgroups walk each tile's list in the compositing backward, each a chunk of it
@@ -121,7 +123,7 @@ pub const MAX_SPLIT: u32 = 16;
 /// 400×300 from 1.5 to 1.3 ms (a short frame's few tiles leave most of a GPU idle while each
 /// workgroup walks a whole list); on lavapipe's two cores it cost 5–10 %.
 pub fn raster_split_for(ctx: &GpuContext) -> RasterSplit {
-    let default = if ctx.adapter_info.device_type == wgpu::DeviceType::Cpu {
+    let default = if ctx.is_cpu() {
         RasterSplit::Fixed(1)
     } else {
         RasterSplit::Auto
@@ -154,21 +156,23 @@ static SPANS_WARNED: std::sync::Once = std::sync::Once::new();
 
 /// Whether the projection and the key emission take a rectangle's rows wider than
 /// `SCAN_WIDTH` tiles as spans (tile_test.wgsl's `row_span`: a seed, two guessed ends and a
-/// few tile tests each, the same tiles) rather than testing every tile: `COCOG_TILE_SPANS=1`.
-/// Off by default until a GPU has timed it: on lavapipe (sharp-dev at 400×300, 63k Gaussians
-/// after 1500 iterations) the two kernels took 7.8–9.9 ms with spans against 4.6–6.9 without,
-/// though a count over that model's rectangles puts the tile tests of the slowest of each 32
-/// Gaussians (what a GPU's subgroup waits for) a quarter lower. Anything but 0 or 1 is said
-/// on stderr and ignored.
-fn tile_spans() -> bool {
+/// few tile tests each, the same tiles) rather than testing every tile: `COCOG_TILE_SPANS=0`
+/// or `1` where set, else spans on a GPU and the scan on a CPU adapter. On an H100
+/// (2026-11-28) spans halved the two kernels at 400×300 (sharp-dev after 30000 iterations,
+/// 110k Gaussians: 0.151 + 0.111 → 0.074 + 0.075 ms) and took its 3dgs step from 513 to 548
+/// it/s; at 100×75 they changed nothing. On lavapipe the two kernels took 7.8–9.9 ms with
+/// spans against 4.6–6.9 without. Anything but 0 or 1 is said on stderr and ignored.
+fn tile_spans(ctx: &GpuContext) -> bool {
+    let default = !ctx.is_cpu();
     match std::env::var("COCOG_TILE_SPANS").as_deref() {
-        Err(_) | Ok("") | Ok("0") => false,
+        Err(_) | Ok("") => default,
+        Ok("0") => false,
         Ok("1") => true,
         Ok(other) => {
             SPANS_WARNED.call_once(|| {
-                eprintln!("COCOG_TILE_SPANS={other}: expected 0 or 1; the scan it is")
+                eprintln!("COCOG_TILE_SPANS={other}: expected 0 or 1; the adapter's default stays")
             });
-            false
+            default
         }
     }
 }
@@ -176,7 +180,7 @@ fn tile_spans() -> bool {
 /// Rows up to this many tiles are scanned: a span costs a seed, four end tests and the guesses'
 /// arithmetic, about eight tests. Over a sharp-dev model's rectangles at 400×300 this width
 /// left the slowest of each 32 Gaussians 26 % fewer tests (4: 18 %, 12: 20 %).
-const SCAN_WIDTH: u32 = 8;
+pub const SCAN_WIDTH: u32 = 8;
 
 /// What the projection's forward and backward share: bindings, cameras and the forward maths.
 fn projection_common() -> String {
@@ -326,8 +330,9 @@ impl Renderer {
                 include_str!("project_backward.wgsl")
             ),
         );
+        let spans = tile_spans(ctx);
         let (project, gather_counts, emit_keys, tile_ranges, check_capacity) =
-            binning_kernels(ctx, tile_spans());
+            binning_kernels(ctx, spans);
         let blocks = RasterBlocks::from_env();
         let atomics = if native_atomics && ctx.float_atomics {
             include_str!("atomic_native.wgsl")
@@ -361,6 +366,7 @@ impl Renderer {
             binding_limit: None,
             blocks,
             raster_split: raster_split_for(ctx),
+            tile_spans: spans,
         }
     }
 
@@ -374,7 +380,14 @@ impl Renderer {
             self.tile_ranges,
             self.check_capacity,
         ) = binning_kernels(ctx, spans);
+        self.tile_spans = spans;
         self
+    }
+
+    /// Whether the projection and the key emission take rows wider than `SCAN_WIDTH` tiles
+    /// as spans.
+    pub fn tile_spans(&self) -> bool {
+        self.tile_spans
     }
 
     /// Plans for at most `bytes` per buffer binding instead of the device's limit.

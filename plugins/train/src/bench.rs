@@ -73,6 +73,9 @@ pub struct BenchReport {
     pub cooperative_matrices: String,
     /// Cooperative matrices enabled (`COCOG_COOPERATIVE_MATRIX=1` where offered).
     pub cooperative_f16: bool,
+    /// F's first layer's forward as its own kernel rather than an implicit GEMM (`COCOG_F_FIRST`,
+    /// else the adapter's default), where F's 3×3 layers run by Winograd.
+    pub direct_first_forward: bool,
     /// How the compositing forward and backward ran (`COCOG_RASTER_BLOCK`, the tile-list split).
     pub compositing: String,
     /// The block layout F's products take on them: `COCOG_COOP_BLOCK`'s where it fits the
@@ -436,6 +439,7 @@ fn measure(
             (width.div_ceil(16), height.div_ceil(16)),
             opts.coc.as_ref().map_or(1, |c| c.net.copies + 1),
         ),
+        direct_first_forward: cocog_engine::nn::direct_first_forward(gpu),
         coop_block: cocog_engine::Gemm::cooperative_block(gpu)
             .map(|b| b.name().unwrap_or("unnamed").to_owned()),
         width,
@@ -480,8 +484,13 @@ impl BenchReport {
             let path = match cocog_engine::nn::ConvPath::from_env() {
                 cocog_engine::nn::ConvPath::Gemm => "implicit GEMMs (COCOG_F_CONV=gemm)",
                 cocog_engine::nn::ConvPath::Tiled => "tiled (COCOG_F_CONV=tiled)",
+                cocog_engine::nn::ConvPath::Winograd if self.direct_first_forward => {
+                    "3×3 layers by Winograd F(2×2, 3×3), the first layer's forward direct, \
+                     GFLOP counted as direct convolutions"
+                }
                 cocog_engine::nn::ConvPath::Winograd => {
-                    "3×3 layers by Winograd F(2×2, 3×3), GFLOP counted as direct convolutions"
+                    "3×3 layers by Winograd F(2×2, 3×3), the first layer as an implicit GEMM, \
+                     GFLOP counted as direct convolutions"
                 }
                 cocog_engine::nn::ConvPath::Coop if self.cooperative_f16 => &format!(
                     "implicit GEMMs on tensor cores (COCOG_F_CONV=coop, block {})",
@@ -623,5 +632,13 @@ fn compositing_setting(
             cocog_engine::splat::SPLIT_TARGET
         ),
     };
-    format!("{block}; {split}")
+    let spans = if renderer.tile_spans() {
+        &format!(
+            "binning takes rectangle rows past {} tiles as spans",
+            cocog_engine::splat::SCAN_WIDTH
+        )
+    } else {
+        "binning tests every tile of each rectangle"
+    };
+    format!("{block}; {split}; {spans}")
 }
