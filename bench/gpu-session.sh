@@ -55,6 +55,10 @@
 #                   (timed without evaluations or checkpoints) and `cocog eval`, then gsplat on
 #                   the same views (peer_gsplat.py train), then the 3dgs step at the run's end
 #                   in each compositing setting                                    ~265 s + gsplat build
+#   peer-quality    #11's PSNR over seeds: SEEDS (default "1 2 3") trainings of peer-train's
+#                   protocol on each side, all at once (bench/peer_quality.py's table: each
+#                   run, each side's mean and spread, the difference and its standard error)
+#                                                         ~300 s (an estimate) + gsplat build
 #   train-split     peer-train's cocog run with the backward's tile lists split
 #                   (COCOG_RASTER_SPLIT, default auto), then `cocog eval`           ~80 s
 #   idle-bench      `cocog bench` rows of sharp-dev at 100×75 and 1M random Gaussians at 1080p
@@ -337,6 +341,37 @@ phase_peer_train() {
     done
 }
 
+# #11's "equal or better test PSNR" over seeds rather than one pair: SEEDS (default "1 2 3")
+# trainings of peer-train's protocol on each side, all at once on the GPU (their times share it,
+# so they are no speed figures; peer-train times one pair alone), then bench/peer_quality.py's
+# table: each run's PSNR, each side's mean and spread, the difference with its standard error.
+phase_peer_quality() {
+    local q="$work/quality" s
+    mkdir -p "$q"
+    gsplat_ready || return 1
+    # Concurrent imports of an unbuilt extension would each start its build (and delete one
+    # another's), so it is built first where no earlier phase built it.
+    if [[ ! -f "$work/gsplat-built" ]]; then
+        (cd /tmp && bounded 200 python3 -c \
+            "from gsplat.cuda._backend import _C; assert _C is not None, 'no CUDA toolkit'") \
+            >>"$log" 2>&1 && touch "$work/gsplat-built" || return 1
+    fi
+    for s in ${SEEDS:-1 2 3}; do
+        [[ -f "$q/cocog-$s/metrics.json" ]] ||
+            { bounded 500 "$cocog" train "$work/in-sharp-dev" -o "$q/cocog-$s" --method 3dgs \
+                --iterations 30000 --checkpoint-every 0 --seed "$s" --force -q &&
+                bounded 60 "$cocog" eval "$q/cocog-$s" -q; } >"$q/cocog-$s.log" 2>&1 &
+        [[ -f "$q/gsplat-$s/result.json" ]] ||
+            bounded 500 python3 "$root/bench/peer_gsplat.py" train "$work/in-sharp-dev" \
+                --out "$q/gsplat-$s" --iterations 30000 --seed "$s" >"$q/gsplat-$s.log" 2>&1 &
+    done
+    wait
+    rm -rf "$q"/gsplat-*/renders
+    # Into session.txt: at most 8 files come back from a call.
+    tail -n 3 "$q"/*.log >>"$log" 2>&1
+    python3 "$root/bench/peer_quality.py" "$q" >>"$log"
+}
+
 # peer-train's cocog run again with the backward's tile lists split as COCOG_RASTER_SPLIT says
 # (auto unless set, which is a GPU's default now: set 1 to time whole lists); gsplat's side is
 # peer-train's.
@@ -446,6 +481,8 @@ need_of() {
         # still has to go.
         peer-synthetic) echo $((100 + ${2:-$(build_left)})) ;;
         peer-train) echo $((310 + ${2:-$(build_left)})) ;;
+        # Six trainings at once; an estimate (gsplat alone took 185 s on an H100).
+        peer-quality) echo $((360 + ${2:-$(build_left)})) ;;
         *) echo 0 ;;
     esac
 }
@@ -486,7 +523,7 @@ while ((i < ${#phases[@]})); do
     p="${phases[i]}"
     i=$((i + 1))
     case "$p" in
-        step | layouts | peer-synthetic | peer-train | train-split | idle-bench | ab)
+        step | layouts | peer-synthetic | peer-train | peer-quality | train-split | idle-bench | ab)
             run_phase "$p" "$(need_of "$p")" ;;
         tests)
             tests_next=$i

@@ -2,7 +2,8 @@
 """Time and score gsplat on cocog's own inputs, for side-by-side figures in BENCHMARKS.md.
 
 Three modes:
-  train SCENE --out DIR [--downscale N --iterations I --prune-scale3d X --no-opacity-reset]
+  train SCENE --out DIR [--downscale N --iterations I --prune-scale3d X --no-opacity-reset
+        --seed S]
       plain 3DGS with gsplat's rasterizer and DefaultStrategy on a cocog scene directory (the
       output of `cocog ingest`): the same views, split, initial points and downscale as
       `cocog train SCENE --method 3dgs`; writes DIR/result.json and the test renders as PNG
@@ -204,7 +205,7 @@ def ssim(a, b, win):
 
 
 def fit(views, params, steps, extent, strategy=None, reset_every=0, sh_every=1000,
-        max_degree=3, warmup=1):
+        max_degree=3, warmup=1, seed=0):
     """Trains `params` on the training views for `steps` steps; returns the seconds of steps
     `warmup`.. (the first ones pay gsplat's CUDA build) and how many steps that timed."""
     import torch
@@ -222,7 +223,7 @@ def fit(views, params, steps, extent, strategy=None, reset_every=0, sh_every=100
     decay = torch.optim.lr_scheduler.ExponentialLR(opt["means"], 0.01 ** (1.0 / steps))
     state = strategy.initialize_state(scene_scale=extent) if strategy else None
     win = ssim_window(3, dev)
-    order = np.random.default_rng(0)
+    order = np.random.default_rng(seed)
     perm, clock = [], None
     if steps <= warmup:
         sys.exit(f"{steps} steps leave none to time after {warmup} warm-up step(s)")
@@ -284,8 +285,11 @@ def train(args):
     strategy = DefaultStrategy(prune_scale3d=args.prune_scale3d, refine_start_iter=500,
                                refine_stop_iter=15000, refine_every=100, reset_every=3000)
     torch.cuda.reset_peak_memory_stats()
+    # The seed picks the view order and the splits' samples (torch's generator), as `cocog
+    # train --seed` picks cocog's: runs of either side with several seeds show their spread.
+    torch.manual_seed(args.seed)
     seconds, timed = fit(views, params, args.iterations, extent, strategy,
-                         reset_every=0 if args.no_opacity_reset else 3000)
+                         reset_every=0 if args.no_opacity_reset else 3000, seed=args.seed)
     from gsplat import rasterization
     os.makedirs(os.path.join(args.out, "renders"), exist_ok=True)
     psnrs = []
@@ -314,7 +318,8 @@ def train(args):
                   scene_scale=extent, train_views=sum(v["split"] == "train" for v in views),
                   test_psnr=float(np.mean(psnrs)) if psnrs else None,
                   peak_gpu_bytes=torch.cuda.max_memory_allocated(),
-                  prune_scale3d=args.prune_scale3d, opacity_reset=not args.no_opacity_reset)
+                  prune_scale3d=args.prune_scale3d, opacity_reset=not args.no_opacity_reset,
+                  seed=args.seed)
     with open(os.path.join(args.out, "result.json"), "w") as f:
         json.dump(result, f, indent=2)
     print(json.dumps(result, indent=2))
@@ -352,6 +357,8 @@ def main():
                    help="world-space prune x scene scale (INRIA 0.1; default off, as cocog's "
                         "auto schedule for forward-facing captures)")
     t.add_argument("--no-opacity-reset", action="store_true")
+    t.add_argument("--seed", type=int, default=0,
+                   help="view order and the strategy's random draws (default 0)")
     w = sub.add_parser("workload", help="time the random Gaussians of cocog bench --synthetic")
     w.add_argument("workload")
     w.add_argument("--out", required=True)
