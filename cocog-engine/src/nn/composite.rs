@@ -901,11 +901,11 @@ fn chunks(w: u32, h: u32, images: u32, chunk: u32) -> impl Iterator<Item = MapSi
 /// kernel: `COCOG_F_FIRST=direct` or `gemm` where set, else direct on a GPU and the implicit
 /// GEMM on a CPU adapter. The GEMM's im2col tile pays a division, a bounds test and a gather
 /// per element (about 2 % of an H200's f32 rate); the direct kernel broadcasts its weights
-/// from workgroup memory. On an H100 (2026-11-28, six renders) it took 0.660 ms at 400×300 against the GEMM's 1.140
-/// (the cocog step 16.4 against 17.0 ms) and 0.075 against 0.091 at 100×75. On lavapipe it
-/// is the slower (120 against 81 ms at 100×75). One pixel per invocation with its 75 inputs
-/// in a local array took 5.5 ms at 400×300 on an H200, so this one keeps its sums in named
-/// variables.
+/// from workgroup memory. On an H100 (2026-11-28, six renders) it took 0.660 ms at 400×300
+/// against the GEMM's 1.140 (the cocog step 16.4 against 17.0 ms) and 0.075 against 0.091 at
+/// 100×75. On lavapipe it is the slower (120 against 81 ms at 100×75). One pixel per
+/// invocation with its 75 inputs in a local array took 5.5 ms at 400×300 on an H200, so this
+/// one keeps its sums in named variables.
 pub fn direct_first_forward(ctx: &GpuContext) -> bool {
     let default = !ctx.is_cpu();
     match std::env::var("COCOG_F_FIRST").as_deref() {
