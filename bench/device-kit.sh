@@ -21,6 +21,9 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 shared="$(cd "${1:-$root/../shared}" && pwd)"
 cd "$root"
 [[ -d "$shared/bench/sharp-dev" ]] || { echo "device-kit: no $shared/bench/sharp-dev" >&2; exit 1; }
+# The LPIPS conversion below needs numpy, which a fresh machine lacks: installed before the
+# 20-minute build rather than found missing after it (2026-11-28).
+python3 -c 'import numpy' 2>/dev/null || python3 -m pip install -q numpy
 exclude="$(git rev-parse --git-path info/exclude)"
 mkdir -p "$(dirname "$exclude")"
 for p in /.gl/ /.device/; do
