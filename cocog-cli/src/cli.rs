@@ -312,8 +312,10 @@ pub struct TrainArgs {
     /// copies centred on their base, heads started at 0.01, h_θ from 1000, F from 6000) or
     /// `code` (the released code: free offsets gated by |1/d - 1/d_F| in the scene's units,
     /// h_θ and F from 1500). Default paper: at 7000 iterations on the dev scenes it leads
-    /// lens on mean PSNR, LPIPS and focus error; code stays under plain 3DGS there
-    /// (BENCHMARKS.md). Runs shorter than 7000
+    /// lens on mean PSNR, LPIPS and focus error; code stays under plain 3DGS there: on scenes
+    /// in metres its heads' released initial scale starts the copies far wider than the blur
+    /// (with `--coc-head-init 0.1` dev-table's base gained 1.2 dB over its first 200 blurred
+    /// steps instead of losing 2.7; BENCHMARKS.md). Runs shorter than 7000
     /// iterations start h_θ and F at the same shares of the run. A resumed run keeps its
     /// checkpoint's variant.
     #[arg(long = "coc-variant")]
