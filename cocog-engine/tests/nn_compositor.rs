@@ -412,6 +412,35 @@ fn gpu_first_layer_forward_defaults_by_adapter() {
     assert_eq!(cocog_engine::nn::direct_first_forward(ctx), !ctx.is_cpu());
 }
 
+/// `cocog bench` reports F's path from the kernels a compositor built, not from the switches.
+#[test]
+fn gpu_compositor_describes_the_kernels_it_built() {
+    let Some(ctx) = test_gpu() else { return };
+    let config = CompositorConfig::with_channels(8);
+    let said = |path, direct| {
+        Compositor::with_options(ctx, config, path, MapPrecision::F32)
+            .with_direct_first_forward(direct)
+            .describe()
+    };
+    assert_eq!(
+        said(ConvPath::Winograd, true),
+        "3×3 layers by Winograd F(2×2, 3×3), the first layer's forward direct"
+    );
+    assert_eq!(
+        said(ConvPath::Winograd, false),
+        "3×3 layers by Winograd F(2×2, 3×3), the first layer as an implicit GEMM"
+    );
+    assert_eq!(said(ConvPath::Gemm, true), "implicit GEMMs");
+    assert_eq!(
+        said(ConvPath::Tiled, false),
+        "tiled convolutions (COCOG_F_CONV=tiled)"
+    );
+    // Without cooperative matrices enabled, coop runs the f32 tiles, and says so.
+    if ctx.cooperative.is_none() {
+        assert_eq!(said(ConvPath::Coop, false), "implicit GEMMs");
+    }
+}
+
 #[test]
 fn gpu_learned_mode_matches_the_reference() {
     gpu_case(CompositeMode::Learned, 8, 3, 7, 9, 5);

@@ -111,10 +111,14 @@ impl ConvPath {
             Ok("gemm") => ConvPath::Gemm,
             Ok("winograd") | Err(_) => ConvPath::Winograd,
             Ok(other) => {
-                // Said on stderr, as the other code-path switches do, rather than refused.
-                eprintln!(
-                    "COCOG_F_CONV={other}: expected gemm, tiled, winograd or coop; Winograd it is"
-                );
+                // Said on stderr (once a process), as the other code-path switches do, rather
+                // than refused.
+                static WARNED: std::sync::Once = std::sync::Once::new();
+                WARNED.call_once(|| {
+                    eprintln!(
+                        "COCOG_F_CONV={other}: expected gemm, tiled, winograd or coop; Winograd it is"
+                    )
+                });
                 ConvPath::Winograd
             }
         }
@@ -314,6 +318,29 @@ impl Compositor {
 
     pub fn precision(&self) -> MapPrecision {
         self.precision
+    }
+
+    /// How F's convolutions run, in words, from the kernels this compositor built (not from
+    /// the switches that asked for them: Winograd falls back to implicit GEMMs past its
+    /// channel limit, tensor cores to the f32 tiles where none were enabled).
+    pub fn describe(&self) -> String {
+        if self.tile.is_some() {
+            return "tiled convolutions (COCOG_F_CONV=tiled)".to_owned();
+        }
+        if self.winograd.is_some() {
+            let first = match &self.first {
+                Some(f) if f.direct => "the first layer's forward direct",
+                _ => "the first layer as an implicit GEMM",
+            };
+            return format!("3×3 layers by Winograd F(2×2, 3×3), {first}");
+        }
+        match self.gemm.block() {
+            Some(b) => format!(
+                "implicit GEMMs on tensor cores (COCOG_F_CONV=coop, block {})",
+                b.name().unwrap_or("unnamed")
+            ),
+            None => "implicit GEMMs".to_owned(),
+        }
     }
 
     /// Plans F's maps for bindings of at most `bytes` (tests reach the chunked path with it).
@@ -907,15 +934,19 @@ fn chunks(w: u32, h: u32, images: u32, chunk: u32) -> impl Iterator<Item = MapSi
 /// invocation with its 75 inputs in a local array took 5.5 ms at 400×300 on an H200, so this
 /// one keeps its sums in named variables.
 pub fn direct_first_forward(ctx: &GpuContext) -> bool {
+    // Said once a process: every compositor (training, refocusing, bench) reads it.
+    static FIRST_WARNED: std::sync::Once = std::sync::Once::new();
     let default = !ctx.is_cpu();
     match std::env::var("COCOG_F_FIRST").as_deref() {
         Ok("direct") => true,
         Ok("gemm") => false,
         Err(_) | Ok("") => default,
         Ok(other) => {
-            eprintln!(
-                "COCOG_F_FIRST={other}: expected gemm or direct; the adapter's default stays"
-            );
+            FIRST_WARNED.call_once(|| {
+                eprintln!(
+                    "COCOG_F_FIRST={other}: expected gemm or direct; the adapter's default stays"
+                )
+            });
             default
         }
     }

@@ -14,7 +14,7 @@
 
 use super::precision::MapPrecision;
 use crate::core::{Bind, GpuContext, Recorder, Workspace};
-use crate::prims::{Gemm, GemmLayout, GemmShape, GemmTile, OperandScales};
+use crate::prims::{CoopBlock, Gemm, GemmLayout, GemmShape, GemmTile, OperandScales};
 
 pub const NO_BIAS: u32 = u32::MAX;
 
@@ -292,6 +292,11 @@ impl ConvGemm {
             k3: kernels(3, channels, "map_t", true),
             k5: kernels(5, 3, "f32", false),
         }
+    }
+
+    /// The tensor-core block layout the 3×3 products run in (None: the f32 tiles).
+    pub fn block(&self) -> Option<CoopBlock> {
+        self.k3.forward.coop_block()
     }
 
     fn kernels(&self, layer: ConvLayer) -> &ConvKernels {

@@ -301,6 +301,12 @@ fn partials_source(split: bool) -> &'static str {
 }
 
 impl Gemm {
+    /// The tensor-core block layout this product runs in; None where it runs on the f32 tiles
+    /// (asked for plainly, or cooperative matrices were not enabled).
+    pub fn coop_block(&self) -> Option<CoopBlock> {
+        self.cooperative.map(|(_, block)| block)
+    }
+
     /// Compiles gemm.wgsl after `problem`, which defines `load_a`, `load_b` and `epilogue`
     /// and its bindings (2 and up); it may use `gemm.m`, `gemm.n`, `gemm.k` and `gemm.u*`.
     pub fn new(ctx: &GpuContext, label: &str, problem: &str, layout: GemmLayout) -> Self {

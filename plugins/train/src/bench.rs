@@ -73,9 +73,9 @@ pub struct BenchReport {
     pub cooperative_matrices: String,
     /// Cooperative matrices enabled (`COCOG_COOPERATIVE_MATRIX=1` where offered).
     pub cooperative_f16: bool,
-    /// F's first layer's forward as its own kernel rather than an implicit GEMM (`COCOG_F_FIRST`,
-    /// else the adapter's default), where F's 3×3 layers run by Winograd.
-    pub direct_first_forward: bool,
+    /// How F's convolutions ran (`Compositor::describe`: the kernels built, whatever the
+    /// switches asked); None for plain 3DGS.
+    pub compositor_path: Option<String>,
     /// How the compositing forward and backward ran (`COCOG_RASTER_BLOCK`, the tile-list split).
     pub compositing: String,
     /// The block layout F's products take on them: `COCOG_COOP_BLOCK`'s where it fits the
@@ -439,7 +439,7 @@ fn measure(
             (width.div_ceil(16), height.div_ceil(16)),
             opts.coc.as_ref().map_or(1, |c| c.net.copies + 1),
         ),
-        direct_first_forward: cocog_engine::nn::direct_first_forward(gpu),
+        compositor_path: trainer.compositor().map(|f| f.describe()),
         coop_block: cocog_engine::Gemm::cooperative_block(gpu)
             .map(|b| b.name().unwrap_or("unnamed").to_owned()),
         width,
@@ -481,24 +481,12 @@ impl BenchReport {
         let mut out = self.summary();
         if let (Some(g), Some(rate)) = (self.compositor_gflop, self.compositor_gflop_per_s) {
             let share = 100.0 * self.phases_ms.compositor / self.phases_ms.total.max(1e-9);
-            let path = match cocog_engine::nn::ConvPath::from_env() {
-                cocog_engine::nn::ConvPath::Gemm => "implicit GEMMs (COCOG_F_CONV=gemm)",
-                cocog_engine::nn::ConvPath::Tiled => "tiled (COCOG_F_CONV=tiled)",
-                cocog_engine::nn::ConvPath::Winograd if self.direct_first_forward => {
-                    "3×3 layers by Winograd F(2×2, 3×3), the first layer's forward direct, \
-                     GFLOP counted as direct convolutions"
-                }
-                cocog_engine::nn::ConvPath::Winograd => {
-                    "3×3 layers by Winograd F(2×2, 3×3), the first layer as an implicit GEMM, \
-                     GFLOP counted as direct convolutions"
-                }
-                cocog_engine::nn::ConvPath::Coop if self.cooperative_f16 => &format!(
-                    "implicit GEMMs on tensor cores (COCOG_F_CONV=coop, block {})",
-                    self.coop_block.as_deref().unwrap_or("none")
-                ),
-                cocog_engine::nn::ConvPath::Coop => {
-                    "implicit GEMMs (COCOG_F_CONV=coop asked, no cooperative matrices enabled)"
-                }
+            let path = self.compositor_path.as_deref().unwrap_or("no compositor");
+            // Winograd's products are fewer than the convolutions' own.
+            let counted = if path.contains("Winograd") {
+                ", GFLOP counted as direct convolutions"
+            } else {
+                ""
             };
             let maps = if self.shader_f16 {
                 "f16 maps"
@@ -507,7 +495,7 @@ impl BenchReport {
             };
             out += &format!(
                 "compositor F     {share:.0}% of the profiled step; {g:.2} GFLOP/iteration in its \
-                 convolutions (forward + backward; {path}, {maps}), {rate:.2} GFLOP/s over the \
+                 convolutions (forward + backward; {path}{counted}, {maps}), {rate:.2} GFLOP/s over the \
                  compositor phase\n"
             );
         }

@@ -468,6 +468,11 @@ impl<'c> Trainer<'c> {
         &self.renderer
     }
 
+    /// CoCoGaussian's compositor F (None for plain 3DGS).
+    pub fn compositor(&self) -> Option<&cocog_engine::nn::Compositor> {
+        self.coc.as_ref().map(|c| &c.compositor)
+    }
+
     pub fn num_gaussians(&self) -> u32 {
         self.batch.as_ref().map_or(0, |b| b.params.num_gaussians)
     }
