@@ -13,6 +13,10 @@
 #   12-full    the same at full size, 30000 iterations (#12)
 #   12-full-table, 12-full-shelf  12-full's two runs of one scene: a lease too short for both
 #              scenes runs one, and a later lease the other
+#   12-full-cocog-table, 12-full-cocog-shelf  the cocog run of one scene alone, so it has the
+#              GPU to itself (a full-size cocog run is most of a 15-minute lease)
+#   12-full-3dgs  the 3dgs runs of both scenes at full size (about a minute each on an H100),
+#              for a lease with room beside other work
 #   12-variants cocog's lens and code variants (--coc-variant) on both dev scenes, --downscale 4,
 #              7000 iterations (#12 asks for both; 12-small trains the default)
 # On lavapipe (128 MiB bindings) 12-full's cocog runs fit (F takes its renders in chunks); a
@@ -41,7 +45,7 @@
 set -euo pipefail
 
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-usage() { sed -n '2,40p' "${BASH_SOURCE[0]}" >&2; exit 2; }
+usage() { sed -n '2,44p' "${BASH_SOURCE[0]}" >&2; exit 2; }
 
 out="" sets=() scenes="$root/../shared/bench" iterations="" train_args=() jobs=1 deadline=""
 while [[ $# -gt 0 ]]; do
@@ -74,6 +78,8 @@ for set in "${sets[@]}"; do
         12-full) for s in dev-table dev-shelf; do runs+=("$s 3dgs 1 30000" "$s cocog 1 30000 paper"); done ;;
         12-full-table | 12-full-shelf) s=dev-${set#12-full-}
             runs+=("$s 3dgs 1 30000" "$s cocog 1 30000 paper") ;;
+        12-full-cocog-table | 12-full-cocog-shelf) runs+=("dev-${set#12-full-cocog-} cocog 1 30000 paper") ;;
+        12-full-3dgs) runs+=("dev-table 3dgs 1 30000" "dev-shelf 3dgs 1 30000") ;;
         12-variants) for s in dev-table dev-shelf; do
             runs+=("$s cocog 4 7000 lens" "$s cocog 4 7000 code"); done ;;
         *) echo "gates.sh: unknown set $set" >&2; usage ;;

@@ -56,9 +56,10 @@
 #                   the same views (peer_gsplat.py train), then the 3dgs step at the run's end
 #                   in each compositing setting                                    ~265 s + gsplat build
 #   peer-quality    #11's PSNR over seeds: SEEDS (default "1 2 3") trainings of peer-train's
-#                   protocol on each side, all at once (bench/peer_quality.py's table: each
-#                   run, each side's mean and spread, the difference and its standard error)
-#                                                         ~300 s (an estimate) + gsplat build
+#                   protocol on each side, at once (bench/peer_quality.py's table: each run,
+#                   each side's mean and spread, the difference and its standard error); as
+#                   many seeds as the budget fits, the rest on a later call
+#                                 ~200 s for one seed, +130 per seed (estimates) + gsplat build
 #   train-split     peer-train's cocog run with the backward's tile lists split
 #                   (COCOG_RASTER_SPLIT, default auto), then `cocog eval`           ~80 s
 #   idle-bench      `cocog bench` rows of sharp-dev at 100×75 and 1M random Gaussians at 1080p
@@ -75,13 +76,17 @@
 #                   12-small 12-variants`; a phase word ends the list). With GATE_ARGS="..."
 #                   every training also gets those options, in runs of their own named after
 #                   them (g-add-points-frame-colmap/, gates-add-points-frame-colmap.tgz)
-# #12's full-size gate, one scene per lease (F by Winograd, the default): the cocog step at
-# 400×300 took 20.3 ms on an H200 on 2026-11-27 (about 17.8 ms since, an estimate), so a
-# 30000-iteration cocog run with the 3dgs run beside it needs about 10 minutes, more than one
-# call: `BUDGET=580 bench/gpu-session.sh RESULTS gates 12-full-table`, then at once the same
-# line again (BUDGET=what is left) to continue the stopped runs from their checkpoints on the
-# still-warm machine; `gates 12-full-shelf` on another lease
-# (the trainings share the GPU; stopped ones continue on the next call with the same line).
+# #12's full-size gate, one cocog run per lease, alone on the GPU: `BUDGET=580
+# bench/gpu-session.sh RESULTS gates 12-full-cocog-table`, then at once the same line again
+# (BUDGET=what is left) to continue the stopped run from its checkpoint on the still-warm
+# machine; `gates 12-full-cocog-shelf` on another lease, and `gates 12-full-3dgs` (both scenes'
+# 3dgs runs, about a minute each) beside other work. It may not fit: the cocog step at 400×300
+# took 16.4 ms on an H100 at 56,739 Gaussians (2026-11-28), F about 10 ms of it whatever the
+# count, h_θ and the six renders growing with it; dev-table's 3dgs run ends at 244k Gaussians at
+# full size, so about 25–30 ms a step once F starts (6000) and 11–13 minutes for the run, an
+# estimate, against the about 830 s of calls a 15-minute lease leaves. A run stopped by the
+# deadline reports its last scored iteration; its checkpoint (about 0.2 GB) cannot come back
+# from the machine (8 files of 16 MiB a call), so a later lease starts it again.
 # gsplat's CUDA code builds once per machine (60–80 s on 16 cores; in the background where an
 # untimed phase comes first); later calls on the same warm machine reuse it. A phase that finished leaves a marker in WORK, so a second call
 # on the same machine goes on with the phases the first did not finish. RESULTS gets session.txt (every
@@ -342,11 +347,16 @@ phase_peer_train() {
 }
 
 # #11's "equal or better test PSNR" over seeds rather than one pair: SEEDS (default "1 2 3")
-# trainings of peer-train's protocol on each side, all at once on the GPU (their times share it,
-# so they are no speed figures; peer-train times one pair alone), then bench/peer_quality.py's
+# trainings of peer-train's protocol on each side, at once on the GPU (their times share it, so
+# they are no speed figures; peer-train times one pair alone), then bench/peer_quality.py's
 # table: each run's PSNR, each side's mean and spread, the difference with its standard error.
+# A training cut by the budget leaves nothing to score, so only the seeds that fit what is left
+# start (seed_wave_s each beyond the first's 200 s: an estimate from one H100 pair, cocog 57 s
+# and gsplat 185 s alone, gsplat's Python-bound steps leaving the GPU room); a later call on the
+# machine runs the rest, and the table covers every finished seed.
+seed_wave_s=130
 phase_peer_quality() {
-    local q="$work/quality" s
+    local q="$work/quality" s todo=() fit
     mkdir -p "$q"
     gsplat_ready || return 1
     # Concurrent imports of an unbuilt extension would each start its build (and delete one
@@ -357,6 +367,14 @@ phase_peer_quality() {
             >>"$log" 2>&1 && touch "$work/gsplat-built" || return 1
     fi
     for s in ${SEEDS:-1 2 3}; do
+        [[ -f "$q/cocog-$s/metrics.json" && -f "$q/gsplat-$s/result.json" ]] || todo+=("$s")
+    done
+    local room=$(($(left) - 10 - 200))
+    fit=$((room < 0 ? 0 : room / seed_wave_s + 1))
+    ((fit < ${#todo[@]})) &&
+        echo "-- peer-quality: $(left) s left, time for ${fit} of the ${#todo[@]} seeds to go; a later call runs the rest" >>"$log"
+    ((fit < 1)) && return 1
+    for s in "${todo[@]:0:fit}"; do
         [[ -f "$q/cocog-$s/metrics.json" ]] ||
             { bounded 500 "$cocog" train "$work/in-sharp-dev" -o "$q/cocog-$s" --method 3dgs \
                 --iterations 30000 --checkpoint-every 0 --seed "$s" --force -q &&
@@ -370,6 +388,10 @@ phase_peer_quality() {
     # Into session.txt: at most 8 files come back from a call.
     tail -n 3 "$q"/*.log >>"$log" 2>&1
     python3 "$root/bench/peer_quality.py" "$q" >>"$log"
+    # Done (the marker) only when every seed was scored on both sides.
+    for s in ${SEEDS:-1 2 3}; do
+        [[ -f "$q/cocog-$s/metrics.json" && -f "$q/gsplat-$s/result.json" ]] || return 1
+    done
 }
 
 # peer-train's cocog run again with the backward's tile lists split as COCOG_RASTER_SPLIT says
@@ -481,8 +503,9 @@ need_of() {
         # still has to go.
         peer-synthetic) echo $((100 + ${2:-$(build_left)})) ;;
         peer-train) echo $((310 + ${2:-$(build_left)})) ;;
-        # Six trainings at once; an estimate (gsplat alone took 185 s on an H100).
-        peer-quality) echo $((360 + ${2:-$(build_left)})) ;;
+        # One seed's pair at least (gsplat alone took 185 s on an H100); more where there
+        # is room (phase_peer_quality).
+        peer-quality) echo $((200 + ${2:-$(build_left)})) ;;
         *) echo 0 ;;
     esac
 }
