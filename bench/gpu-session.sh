@@ -59,7 +59,7 @@
 #                   protocol on each side, at once (bench/peer_quality.py's table: each run,
 #                   each side's mean and spread, the difference and its standard error); as
 #                   many seeds as the budget fits, the rest on a later call
-#                                 ~200 s for one seed, +130 per seed (estimates) + gsplat build
+#                                 ~240 s for one seed, +130 per seed (estimates) + gsplat build
 #   train-split     peer-train's cocog run with the backward's tile lists split
 #                   (COCOG_RASTER_SPLIT, default auto), then `cocog eval`           ~80 s
 #   idle-bench      `cocog bench` rows of sharp-dev at 100×75 and 1M random Gaussians at 1080p
@@ -351,12 +351,13 @@ phase_peer_train() {
 # they are no speed figures; peer-train times one pair alone), then bench/peer_quality.py's
 # table: each run's PSNR, each side's mean and spread, the difference with its standard error.
 # A training cut by the budget leaves nothing to score, so only the seeds that fit what is left
-# start (seed_wave_s each beyond the first's 200 s: an estimate from one H100 pair, cocog 57 s
-# and gsplat 185 s alone, gsplat's Python-bound steps leaving the GPU room); a later call on the
-# machine runs the rest, and the table covers every finished seed.
+# start (seed_wave_s each beyond the first's seed_first_s: estimates from one H100 pair, cocog
+# 57 s and gsplat 185 s alone, gsplat's Python-bound steps leaving the GPU room); a later call
+# on the machine runs the rest, and the table covers every finished seed.
+seed_first_s=240
 seed_wave_s=130
 phase_peer_quality() {
-    local q="$work/quality" s todo=() fit
+    local q="$work/quality" s todo=() fit i
     mkdir -p "$q"
     gsplat_ready || return 1
     # Concurrent imports of an unbuilt extension would each start its build (and delete one
@@ -369,12 +370,16 @@ phase_peer_quality() {
     for s in ${SEEDS:-1 2 3}; do
         [[ -f "$q/cocog-$s/metrics.json" && -f "$q/gsplat-$s/result.json" ]] || todo+=("$s")
     done
-    local room=$(($(left) - 10 - 200))
+    local room=$(($(left) - 10 - seed_first_s))
     fit=$((room < 0 ? 0 : room / seed_wave_s + 1))
-    ((fit < ${#todo[@]})) &&
+    ((fit > ${#todo[@]})) && fit=${#todo[@]}
+    if ((fit < ${#todo[@]})); then
         echo "-- peer-quality: $(left) s left, time for ${fit} of the ${#todo[@]} seeds to go; a later call runs the rest" >>"$log"
-    ((fit < 1)) && return 1
-    for s in "${todo[@]:0:fit}"; do
+        ((fit == 0)) && return 1
+    fi
+    # Not "${todo[@]:0:fit}": bash before 4.4 calls an empty array unbound under set -u.
+    for ((i = 0; i < fit; i++)); do
+        s=${todo[i]}
         [[ -f "$q/cocog-$s/metrics.json" ]] ||
             { bounded 500 "$cocog" train "$work/in-sharp-dev" -o "$q/cocog-$s" --method 3dgs \
                 --iterations 30000 --checkpoint-every 0 --seed "$s" --force -q &&
@@ -505,7 +510,7 @@ need_of() {
         peer-train) echo $((310 + ${2:-$(build_left)})) ;;
         # One seed's pair at least (gsplat alone took 185 s on an H100); more where there
         # is room (phase_peer_quality).
-        peer-quality) echo $((200 + ${2:-$(build_left)})) ;;
+        peer-quality) echo $((seed_first_s + 10 + ${2:-$(build_left)})) ;;
         *) echo 0 ;;
     esac
 }

@@ -412,32 +412,38 @@ fn gpu_first_layer_forward_defaults_by_adapter() {
     assert_eq!(cocog_engine::nn::direct_first_forward(ctx), !ctx.is_cpu());
 }
 
-/// `cocog bench` reports F's path from the kernels a compositor built, not from the switches.
+/// `cocog bench` reports F's path from the kernels a compositor built and the passes that use
+/// them, not from the switches.
 #[test]
-fn gpu_compositor_describes_the_kernels_it_built() {
+fn gpu_compositor_describes_the_kernels_it_runs() {
     let Some(ctx) = test_gpu() else { return };
-    let config = CompositorConfig::with_channels(8);
-    let said = |path, direct| {
+    let said = |channels, path, direct| {
+        let config = CompositorConfig::with_channels(channels);
         Compositor::with_options(ctx, config, path, MapPrecision::F32)
             .with_direct_first_forward(direct)
             .describe()
     };
     assert_eq!(
-        said(ConvPath::Winograd, true),
-        "3×3 layers by Winograd F(2×2, 3×3), the first layer's forward direct"
+        said(32, ConvPath::Winograd, true),
+        "3×3 layer by Winograd F(2×2, 3×3), the first layer's forward direct"
     );
     assert_eq!(
-        said(ConvPath::Winograd, false),
-        "3×3 layers by Winograd F(2×2, 3×3), the first layer as an implicit GEMM"
+        said(32, ConvPath::Winograd, false),
+        "3×3 layer by Winograd F(2×2, 3×3), the first layer's forward as an implicit GEMM"
     );
-    assert_eq!(said(ConvPath::Gemm, true), "implicit GEMMs");
+    // Below 32 channels the 3×3 layer's passes take the GEMMs; the first layer keeps its own.
     assert_eq!(
-        said(ConvPath::Tiled, false),
+        said(8, ConvPath::Winograd, true),
+        "implicit GEMMs, the first layer's forward direct"
+    );
+    assert_eq!(said(32, ConvPath::Gemm, true), "implicit GEMMs");
+    assert_eq!(
+        said(8, ConvPath::Tiled, false),
         "tiled convolutions (COCOG_F_CONV=tiled)"
     );
     // Without cooperative matrices enabled, coop runs the f32 tiles, and says so.
     if ctx.cooperative.is_none() {
-        assert_eq!(said(ConvPath::Coop, false), "implicit GEMMs");
+        assert_eq!(said(8, ConvPath::Coop, false), "implicit GEMMs");
     }
 }
 

@@ -320,26 +320,28 @@ impl Compositor {
         self.precision
     }
 
-    /// How F's convolutions run, in words, from the kernels this compositor built (not from
-    /// the switches that asked for them: Winograd falls back to implicit GEMMs past its
-    /// channel limit, tensor cores to the f32 tiles where none were enabled).
+    /// How F's convolutions run, in words, from the kernels this compositor built and the
+    /// passes that use them (not from the switches that asked: Winograd serves only a 3×3
+    /// layer summing `ConvWinograd::MIN_SUMMED` channels or more, and tensor cores give way to
+    /// the f32 tiles where none were enabled).
     pub fn describe(&self) -> String {
-        if self.tile.is_some() {
-            return "tiled convolutions (COCOG_F_CONV=tiled)".to_owned();
-        }
-        if self.winograd.is_some() {
-            let first = match &self.first {
-                Some(f) if f.direct => "the first layer's forward direct",
-                _ => "the first layer as an implicit GEMM",
-            };
-            return format!("3×3 layers by Winograd F(2×2, 3×3), {first}");
-        }
-        match self.gemm.block() {
-            Some(b) => format!(
+        let [_, c2, _] = self.convs();
+        let wide = if self.winograd_for(c2, false).is_some() {
+            "3×3 layer by Winograd F(2×2, 3×3)".to_owned()
+        } else if self.tile.is_some() {
+            "tiled convolutions (COCOG_F_CONV=tiled)".to_owned()
+        } else if let Some(b) = self.gemm.coop_block() {
+            format!(
                 "implicit GEMMs on tensor cores (COCOG_F_CONV=coop, block {})",
                 b.name().unwrap_or("unnamed")
-            ),
-            None => "implicit GEMMs".to_owned(),
+            )
+        } else {
+            "implicit GEMMs".to_owned()
+        };
+        match &self.first {
+            Some(f) if f.direct => format!("{wide}, the first layer's forward direct"),
+            Some(_) => format!("{wide}, the first layer's forward as an implicit GEMM"),
+            None => wide,
         }
     }
 

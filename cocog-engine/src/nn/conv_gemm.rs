@@ -295,7 +295,7 @@ impl ConvGemm {
     }
 
     /// The tensor-core block layout the 3×3 products run in (None: the f32 tiles).
-    pub fn block(&self) -> Option<CoopBlock> {
+    pub fn coop_block(&self) -> Option<CoopBlock> {
         self.k3.forward.coop_block()
     }
 
