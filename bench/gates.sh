@@ -119,9 +119,11 @@ one_run() {
     [[ -d "$out/$name.checkpoint" ]] && resume=(--resume "$out/$name.checkpoint")
     echo "gates: $name${resume[@]+ (continued)}" >&2
     # A run that fails (e.g. refused as too large for this adapter) gets a row and the rest go on.
+    # No periodic checkpoints (a full-size run's is about 0.2 GB, read back and written every
+    # 1000 iterations by default): the deadline's interrupt (SIGINT) still writes one.
     ${limit[@]+"${limit[@]}"} "$cocog" train "$out/.ingest-$scene" -o "$out/$name" --force -q \
         --method "$method" ${variant:+--coc-variant "$variant"} --downscale "$down" \
-        --iterations "$its" --eval-every 500 ${resume[@]+"${resume[@]}"} \
+        --iterations "$its" --eval-every 500 --checkpoint-every 0 ${resume[@]+"${resume[@]}"} \
         ${train_args[@]+"${train_args[@]}"} \
         >"$out/$name.log" 2>&1 || rc=$?
     if ((rc == 124)) && [[ -f "$out/$name.train-log.jsonl" ]]; then

@@ -1,5 +1,6 @@
 //! Niantic `.spz` (file version 3: one gzip stream), the compressed splat format Scaniverse,
-//! SuperSplat, Spark, Babylon.js and three.js open; about a tenth of the PLY's size.
+//! SuperSplat, Spark, Babylon.js and three.js open. At SH 3 a Gaussian takes 65 bytes before
+//! gzip, against the INRIA PLY's 248.
 //!
 //! Layout (all little-endian): a 16-byte header (magic "NGSP", version, count, SH degree,
 //! fractional bits, flags, reserved), then per attribute an array over every splat: positions

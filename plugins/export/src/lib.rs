@@ -1,6 +1,6 @@
 //! The `export` stage: writes a scene's Gaussians to one file, `.ply` (INRIA 3DGS, every viewer
 //! reads it), `.glb` (glTF `KHR_gaussian_splatting`, the standards-track alternative) or `.spz`
-//! (Niantic's compressed format, about a tenth of the PLY).
+//! (Niantic's compressed format: at SH 3, 65 bytes a Gaussian before gzip against the PLY's 248).
 
 use cocog_formats::glb::write_glb;
 use cocog_formats::ply::{read_splats, write_splats};
