@@ -81,13 +81,13 @@
 # (BUDGET=what is left) to continue the stopped run from its checkpoint on the still-warm
 # machine; `gates 12-full-cocog-shelf` on another lease, and `gates 12-full-3dgs` (both scenes'
 # 3dgs runs, about a minute each) beside other work. It may not fit: the cocog step at 400×300
-# took 16.4 ms on an H100 at 56,739 Gaussians (2026-11-28), F about 10 ms of it whatever the
-# count, h_θ, the projections and sorts growing with it, the compositing with the tiles each
-# Gaussian covers; dev-table's 3dgs run ends at 244k Gaussians at full size, so about 19–25 ms
-# a step once F starts (6000) and 8–11 minutes for the run, an estimate, against the about
-# 830 s of calls a 15-minute lease leaves. A run stopped by the deadline reports its last
-# scored iteration; its checkpoint (about 0.2 GB) cannot come back from the machine (8 files of
-# 16 MiB a call), so a later lease starts it again.
+# took 16.4 ms on an H100 at 56,739 Gaussians (2026-11-28), F 11.9 ms of it whatever the count,
+# h_θ, the projections and sorts growing with it, the compositing with the tiles each Gaussian
+# covers; at the 150–350k Gaussians a full-size run may reach, about 21–32 ms a step once F
+# starts (6000) and 9–14 minutes for the run (BENCHMARKS.md, session 43; an estimate), against
+# the about 830 s of calls a 15-minute lease leaves. A run stopped by the deadline reports its
+# last scored iteration; its checkpoint (0.1–0.25 GB) cannot come back from the machine (8
+# files of 16 MiB a call), so a later lease starts it again.
 # gsplat's CUDA code builds once per machine (60–80 s on 16 cores; in the background where an
 # untimed phase comes first); later calls on the same warm machine reuse it. A phase that finished leaves a marker in WORK, so a second call
 # on the same machine goes on with the phases the first did not finish. RESULTS gets session.txt (every
