@@ -24,7 +24,9 @@
 # test --no-run`):
 #   step            #12's step ratio: a 5000-iteration 3dgs run on dev-table at 100×75 gives the
 #                   Gaussians, then `cocog bench --resume` times a 3dgs step and a cocog step
-#                   (the default variant, F on) on them, the latter with F's convolutions as
+#                   (the default variant, F on) on them, each also with its kernels compiled
+#                   without naga's run-time guards (COCOG_SHADER_CHECKS=0, here and at
+#                   400×300), the cocog step with F's convolutions as
 #                   implicit GEMMs (COCOG_F_CONV=gemm), as tiled kernels (COCOG_F_CONV=tiled)
 #                   and with its 3×3 layers by Winograd (the default), that with the first
 #                   layer's forward as an implicit GEMM (COCOG_F_FIRST=gemm; a GPU's default
@@ -226,13 +228,14 @@ step_model() {
 
 # `env` without the caller's code-path switches: each bench row sets its own.
 clean_env=(env -u COCOG_F_CONV -u COCOG_NO_F16 -u COCOG_COOPERATIVE_MATRIX -u COCOG_COOP_BLOCK
-    -u COCOG_RASTER_BLOCK -u COCOG_RASTER_SPLIT -u COCOG_F_FIRST -u COCOG_TILE_SPANS)
+    -u COCOG_RASTER_BLOCK -u COCOG_RASTER_SPLIT -u COCOG_F_FIRST -u COCOG_TILE_SPANS
+    -u COCOG_SHADER_CHECKS)
 
 phase_step() {
     local model
     model=$(step_model) || return 1
     local m vars
-    for m in 3dgs cocog cocog-tiled cocog-winograd cocog-fgemm cocog-f32 cocog-coop 3dgs-b8 cocog-b8 3dgs-b16 cocog-b16 3dgs-whole cocog-whole 3dgs-scan cocog-scan; do
+    for m in 3dgs 3dgs-unchecked cocog-winograd cocog-unchecked cocog cocog-tiled cocog-fgemm cocog-f32 cocog-coop 3dgs-b8 cocog-b8 3dgs-b16 cocog-b16 3dgs-whole cocog-whole 3dgs-scan cocog-scan; do
         echo "-- $m step on the model's Gaussians" >>"$log"
         vars=(COCOG_F_CONV=gemm)  # the rows named cocog-winograd time the default
         [[ $m == *-tiled ]] && vars=(COCOG_F_CONV=tiled)
@@ -250,6 +253,11 @@ phase_step() {
         # Every tile of each Gaussian's rectangle tested (a GPU's default takes wide rows as
         # spans).
         [[ $m == *-scan ]] && vars+=(COCOG_TILE_SPANS=0)
+        # The defaults with the kernels compiled without naga's run-time guards (loop caps,
+        # index clamps, division guards, zeroed workgroup memory): wgpu issue 7698 saw its
+        # loop caps take a kernel from 0.1 to 10 ms; lavapipe showed no difference.
+        [[ $m == cocog-unchecked ]] && vars=(COCOG_F_CONV=winograd)
+        [[ $m == *-unchecked ]] && vars+=(COCOG_SHADER_CHECKS=0)
         bounded 60 "${clean_env[@]}" "${vars[@]}" "$cocog" bench "$work/in-dev-table" --downscale 4 \
             --resume "$model" --method "${m%%-*}" --iterations 100 --warmup 10 --kernels \
             >>"$log" 2>&1
@@ -263,7 +271,8 @@ phase_step() {
         bounded 60 "${clean_env[@]}" $c "$cocog" bench "$work/in-dev-table" --downscale 1 \
             --resume "$model" --method 3dgs --iterations 100 --warmup 10 --kernels >>"$log" 2>&1
     done
-    cocog_full_size "$model" gemm:4x4 winograd:4x4 winograd-direct:4x4 coop:4x4
+    cocog_full_size "$model" winograd-direct:4x4 winograd-direct-unchecked:4x4 gemm:4x4 \
+        winograd:4x4 coop:4x4
 }
 
 # The cocog step at 400×300 on model $1 with F as each of $2...: gemm:4x4 (the f32 products),
@@ -275,10 +284,11 @@ cocog_full_size() {
     local model=$1 m
     shift
     for m in "$@"; do
-        local conv=${m%%:*} first=gemm
+        local conv=${m%%:*} first=gemm checks=1
+        [[ $conv == *-unchecked ]] && conv=${conv%-unchecked} checks=0
         [[ $conv == *-direct ]] && conv=${conv%-direct} first=direct
-        echo "-- cocog step at 400×300 on the model's Gaussians, COCOG_F_CONV=$conv COCOG_F_FIRST=$first$([[ $m == coop* ]] && echo " block ${m#*:}")" >>"$log"
-        bounded 60 "${clean_env[@]}" COCOG_F_CONV=$conv COCOG_F_FIRST=$first COCOG_COOP_BLOCK=${m#*:} \
+        echo "-- cocog step at 400×300 on the model's Gaussians, COCOG_F_CONV=$conv COCOG_F_FIRST=$first COCOG_SHADER_CHECKS=$checks$([[ $m == coop* ]] && echo " block ${m#*:}")" >>"$log"
+        bounded 60 "${clean_env[@]}" COCOG_F_CONV=$conv COCOG_F_FIRST=$first COCOG_SHADER_CHECKS=$checks COCOG_COOP_BLOCK=${m#*:} \
             COCOG_COOPERATIVE_MATRIX=$([[ $m == coop* ]] && echo 1 || echo 0) \
             "${COCOG_FULL_SIZE:-$cocog}" bench "$work/in-dev-table" --downscale 1 --resume "$model" \
             --method cocog --iterations 30 --warmup 5 --kernels >>"$log" 2>&1
@@ -313,13 +323,15 @@ phase_peer_synthetic() {
     gsplat_ran $?
 }
 
-# The compositing settings the benches compare: whole tile lists in the backward, 8×8 blocks
+# The settings the 3dgs benches compare: every default with naga's run-time guards and without
+# them (COCOG_SHADER_CHECKS, the two next to each other), whole tile lists in the backward, 8×8 blocks
 # on both sides, 16×16 tiles on both sides (by default the forward takes 8×8 blocks below 2048
 # tiles), tile lists split (as many chunks as RasterSplit::Auto picks, a GPU's default, and 4),
 # and the projection and key emission testing every tile of a rectangle (a GPU's default takes
 # its wide rows as spans).
-raster_settings=("COCOG_RASTER_SPLIT=1" "COCOG_RASTER_BLOCK=8" "COCOG_RASTER_BLOCK=16"
-    "COCOG_RASTER_SPLIT=auto" "COCOG_RASTER_SPLIT=4" "COCOG_TILE_SPANS=0")
+raster_settings=("COCOG_SHADER_CHECKS=1" "COCOG_SHADER_CHECKS=0" "COCOG_RASTER_SPLIT=1"
+    "COCOG_RASTER_BLOCK=8" "COCOG_RASTER_BLOCK=16" "COCOG_RASTER_SPLIT=auto" "COCOG_RASTER_SPLIT=4"
+    "COCOG_TILE_SPANS=0")
 
 # cocog's side of peer-train: sharp-dev at 400×300, 30000 iterations of 3dgs, timed, then scored.
 train_sharp_dev() {

@@ -50,7 +50,7 @@ mod types;
 pub use crate::core::{
     Bind, CoopFragments, CounterSnapshot, Counters, GpuBuffer, GpuContext, Kernel, KernelProfiler,
     KernelTime, MemoryTracker, Readback, Recorder, UniformSlot, Workspace,
-    device_select_probe_is_futile, quiet_headless_vulkan, shader, test_gpu,
+    device_select_probe_is_futile, quiet_headless_vulkan, runtime_checks, shader, test_gpu,
 };
 pub use error::EngineError;
 pub use prims::{

@@ -50,7 +50,13 @@ impl Kernel {
                 layout: None,
                 module,
                 entry_point: Some(entry),
-                compilation_options: Default::default(),
+                compilation_options: wgpu::PipelineCompilationOptions {
+                    // Every kernel writes its workgroup memory before reading it (barriers
+                    // between), so naga's zeroing at each workgroup's start is work for
+                    // nothing where runtime checks are off (`runtime_checks`).
+                    zero_initialize_workgroup_memory: runtime_checks(),
+                    ..Default::default()
+                },
                 cache: None,
             });
         Self {
@@ -131,14 +137,41 @@ impl Kernel {
     }
 }
 
+/// Whether naga guards our kernels at run time (the default): array indices clamped, every
+/// loop given an iteration cap, integer divisions guarded against zero, workgroup memory
+/// zeroed at each workgroup's start. `COCOG_SHADER_CHECKS=0` compiles them without (an
+/// experiment until a GPU times it): the kernels are this crate's own, their indices in range
+/// and their loops bounded by construction, which the f64-reference tests check with the guards
+/// off as well as on. Read once a process.
+pub fn runtime_checks() -> bool {
+    static CHECKS: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *CHECKS.get_or_init(|| match std::env::var("COCOG_SHADER_CHECKS").as_deref() {
+        Ok("0") => false,
+        Ok("1") | Ok("") | Err(_) => true,
+        Ok(other) => {
+            eprintln!("COCOG_SHADER_CHECKS={other}: expected 0 or 1; the checks stay on");
+            true
+        }
+    })
+}
+
 /// Compiles WGSL `source`. Its `enable …;` lines move to the top, where WGSL requires them,
 /// so a prelude that needs an extension can be placed anywhere in a composed source.
 pub fn shader(ctx: &GpuContext, label: &str, source: &str) -> wgpu::ShaderModule {
-    ctx.device
-        .create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some(label),
-            source: wgpu::ShaderSource::Wgsl(hoist_enables(source).into()),
-        })
+    let desc = wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(hoist_enables(source).into()),
+    };
+    if runtime_checks() {
+        return ctx.device.create_shader_module(desc);
+    }
+    // SAFETY: the source is one of this crate's kernels: every index stays inside its array
+    // and binding, every loop ends and every divisor is non-zero by construction (the
+    // kernels' tests run with the checks off too); see `runtime_checks`.
+    unsafe {
+        ctx.device
+            .create_shader_module_trusted(desc, wgpu::ShaderRuntimeChecks::unchecked())
+    }
 }
 
 pub(crate) fn hoist_enables(source: &str) -> String {

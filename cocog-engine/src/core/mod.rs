@@ -18,7 +18,7 @@ pub use counters::{CounterSnapshot, Counters};
 pub use headless::{device_select_probe_is_futile, quiet_headless_vulkan};
 #[cfg(test)]
 pub(crate) use kernel::hoist_enables;
-pub use kernel::{Kernel, shader};
+pub use kernel::{Kernel, runtime_checks, shader};
 pub use profiler::{KernelProfiler, KernelTime};
 pub use readback::Readback;
 pub use recorder::{Bind, Recorder, UniformSlot};

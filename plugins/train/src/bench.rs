@@ -78,6 +78,8 @@ pub struct BenchReport {
     pub compositor_path: Option<String>,
     /// How the compositing forward and backward ran (`COCOG_RASTER_BLOCK`, the tile-list split).
     pub compositing: String,
+    /// Whether the kernels were compiled with naga's run-time guards (`COCOG_SHADER_CHECKS`).
+    pub shader_checks: bool,
     /// The block layout F's products take on them: `COCOG_COOP_BLOCK`'s where it fits the
     /// adapter, else the default one.
     pub coop_block: Option<String>,
@@ -440,6 +442,7 @@ fn measure(
             opts.coc.as_ref().map_or(1, |c| c.net.copies + 1),
         ),
         compositor_path: trainer.compositor().map(|f| f.describe()),
+        shader_checks: cocog_engine::runtime_checks(),
         coop_block: cocog_engine::Gemm::cooperative_block(gpu)
             .map(|b| b.name().unwrap_or("unnamed").to_owned()),
         width,
@@ -525,6 +528,7 @@ impl BenchReport {
              Gaussians        {} → {} (from iteration {})\n\
              method           {}\n\
              compositing      {}\n\
+             shader checks    {}\n\
              throughput       {:.2} it/s, {:.1} ms/iteration ({} iterations)\n\
              host ms/it       {:.2} recording | {:.2} in queue.submit\n\
              profiled ms/it   forward {:.1} | backward {:.1} | optimizer {:.1} | density {:.1}{} | sum {:.1}\n\
@@ -558,6 +562,11 @@ impl BenchReport {
             self.start_iteration,
             self.method,
             self.compositing,
+            if self.shader_checks {
+                "on (naga's index clamps, loop caps, division guards, zeroed workgroup memory)"
+            } else {
+                "off (COCOG_SHADER_CHECKS=0)"
+            },
             self.it_per_s,
             self.ms_per_iteration,
             self.iterations,
