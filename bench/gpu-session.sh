@@ -254,7 +254,7 @@ phase_step() {
         # spans).
         [[ $m == *-scan ]] && vars+=(COCOG_TILE_SPANS=0)
         # The defaults with the kernels compiled without naga's run-time guards (loop caps,
-        # index clamps, division guards, zeroed workgroup memory): wgpu issue 7698 saw its
+        # index clamps, division guards): wgpu issue 7698 saw its
         # loop caps take a kernel from 0.1 to 10 ms; lavapipe showed no difference.
         [[ $m == cocog-unchecked ]] && vars=(COCOG_F_CONV=winograd)
         [[ $m == *-unchecked ]] && vars+=(COCOG_SHADER_CHECKS=0)

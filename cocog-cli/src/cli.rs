@@ -525,8 +525,9 @@ pub enum ExportFormat {
     /// glTF binary with KHR_gaussian_splatting (three.js, Babylon.js).
     Glb,
     /// Niantic SPZ (version 3, gzip; at SH 3, 65 bytes a Gaussian before gzip against the PLY's
-    /// 248): SuperSplat, Spark, Babylon.js, three.js. Stored in SPZ's RUB axes (turned 180° about X from the PLY's, as Niantic's
-    /// library converts PLY); positions to 2^-12 scene units within ±2048.
+    /// 248): SuperSplat, Spark, Babylon.js, three.js. Stored in SPZ's RUB axes (turned 180°
+    /// about X from the PLY's, as Niantic's library converts PLY); positions to 2^-12 scene
+    /// units within ±2048.
     Spz,
 }
 

@@ -50,13 +50,7 @@ impl Kernel {
                 layout: None,
                 module,
                 entry_point: Some(entry),
-                compilation_options: wgpu::PipelineCompilationOptions {
-                    // Every kernel writes its workgroup memory before reading it (barriers
-                    // between), so naga's zeroing at each workgroup's start is work for
-                    // nothing where runtime checks are off (`runtime_checks`).
-                    zero_initialize_workgroup_memory: runtime_checks(),
-                    ..Default::default()
-                },
+                compilation_options: Default::default(),
                 cache: None,
             });
         Self {
@@ -138,11 +132,12 @@ impl Kernel {
 }
 
 /// Whether naga guards our kernels at run time (the default): array indices clamped, every
-/// loop given an iteration cap, integer divisions guarded against zero, workgroup memory
-/// zeroed at each workgroup's start. `COCOG_SHADER_CHECKS=0` compiles them without (an
-/// experiment until a GPU times it): the kernels are this crate's own, their indices in range
-/// and their loops bounded by construction, which the f64-reference tests check with the guards
-/// off as well as on. Read once a process.
+/// loop given an iteration cap, integer divisions guarded against zero. `COCOG_SHADER_CHECKS=0`
+/// compiles them without (an experiment until a GPU times it): the kernels are this crate's
+/// own, their indices in range and their loops bounded by construction, which the f64-reference
+/// tests check with the guards off as well as on. Workgroup memory is still zeroed when a
+/// workgroup starts: no test could show that every kernel writes what it reads there. Read once
+/// a process.
 pub fn runtime_checks() -> bool {
     static CHECKS: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
     *CHECKS.get_or_init(|| match std::env::var("COCOG_SHADER_CHECKS").as_deref() {

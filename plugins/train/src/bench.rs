@@ -563,7 +563,7 @@ impl BenchReport {
             self.method,
             self.compositing,
             if self.shader_checks {
-                "on (naga's index clamps, loop caps, division guards, zeroed workgroup memory)"
+                "on (naga's index clamps, loop caps and division guards)"
             } else {
                 "off (COCOG_SHADER_CHECKS=0)"
             },
