@@ -369,6 +369,10 @@ phase_peer_train() {
 # on the machine runs the rest, and the table covers every finished seed.
 seed_first_s=240
 seed_wave_s=130
+# Whether seed $1 was scored on both sides in $2.
+seed_done() {
+    [[ -f "$2/cocog-$1/metrics.json" && -f "$2/gsplat-$1/result.json" ]]
+}
 phase_peer_quality() {
     local q="$work/quality" s todo=() fit i
     mkdir -p "$q"
@@ -381,7 +385,7 @@ phase_peer_quality() {
             >>"$log" 2>&1 && touch "$work/gsplat-built" || return 1
     fi
     for s in ${SEEDS:-1 2 3}; do
-        [[ -f "$q/cocog-$s/metrics.json" && -f "$q/gsplat-$s/result.json" ]] || todo+=("$s")
+        seed_done "$s" "$q" || todo+=("$s")
     done
     local room=$(($(left) - 10 - seed_first_s))
     fit=$((room < 0 ? 0 : room / seed_wave_s + 1))
@@ -408,7 +412,7 @@ phase_peer_quality() {
     python3 "$root/bench/peer_quality.py" "$q" >>"$log"
     # Done (the marker) only when every seed was scored on both sides.
     for s in ${SEEDS:-1 2 3}; do
-        [[ -f "$q/cocog-$s/metrics.json" && -f "$q/gsplat-$s/result.json" ]] || return 1
+        seed_done "$s" "$q" || return 1
     done
 }
 

@@ -320,13 +320,19 @@ impl Compositor {
         self.precision
     }
 
+    /// Whether the wide 3×3 layer's passes run by Winograd (fewer products than the
+    /// convolution's own, which `cocog bench` counts).
+    pub fn runs_winograd(&self) -> bool {
+        let [_, c2, _] = self.convs();
+        self.winograd_for(c2, false).is_some()
+    }
+
     /// How F's convolutions run, in words, from the kernels this compositor built and the
     /// passes that use them (not from the switches that asked: Winograd serves only a 3×3
     /// layer summing `ConvWinograd::MIN_SUMMED` channels or more, and tensor cores give way to
     /// the f32 tiles where none were enabled).
     pub fn describe(&self) -> String {
-        let [_, c2, _] = self.convs();
-        let wide = if self.winograd_for(c2, false).is_some() {
+        let wide = if self.runs_winograd() {
             "3×3 layer by Winograd F(2×2, 3×3)".to_owned()
         } else if self.tile.is_some() {
             "tiled convolutions (COCOG_F_CONV=tiled)".to_owned()

@@ -76,6 +76,8 @@ pub struct BenchReport {
     /// How F's convolutions ran (`Compositor::describe`: the kernels built, whatever the
     /// switches asked); None for plain 3DGS.
     pub compositor_path: Option<String>,
+    /// F's 3×3 layer ran by Winograd, so its GFLOP are counted as direct convolutions'.
+    pub compositor_winograd: bool,
     /// How the compositing forward and backward ran (`COCOG_RASTER_BLOCK`, the tile-list split).
     pub compositing: String,
     /// Whether the kernels were compiled with naga's run-time guards (`COCOG_SHADER_CHECKS`).
@@ -442,6 +444,7 @@ fn measure(
             opts.coc.as_ref().map_or(1, |c| c.net.copies + 1),
         ),
         compositor_path: trainer.compositor().map(|f| f.describe()),
+        compositor_winograd: trainer.compositor().is_some_and(|f| f.runs_winograd()),
         shader_checks: cocog_engine::runtime_checks(),
         coop_block: cocog_engine::Gemm::cooperative_block(gpu)
             .map(|b| b.name().unwrap_or("unnamed").to_owned()),
@@ -485,8 +488,7 @@ impl BenchReport {
         if let (Some(g), Some(rate)) = (self.compositor_gflop, self.compositor_gflop_per_s) {
             let share = 100.0 * self.phases_ms.compositor / self.phases_ms.total.max(1e-9);
             let path = self.compositor_path.as_deref().unwrap_or("no compositor");
-            // Winograd's products are fewer than the convolutions' own.
-            let counted = if path.contains("Winograd") {
+            let counted = if self.compositor_winograd {
                 ", GFLOP counted as direct convolutions"
             } else {
                 ""
