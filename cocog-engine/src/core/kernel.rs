@@ -140,13 +140,13 @@ impl Kernel {
 /// a process.
 pub fn runtime_checks() -> bool {
     static CHECKS: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    *CHECKS.get_or_init(|| match std::env::var("COCOG_SHADER_CHECKS").as_deref() {
-        Ok("0") => false,
-        Ok("1") | Ok("") | Err(_) => true,
-        Ok(other) => {
-            eprintln!("COCOG_SHADER_CHECKS={other}: expected 0 or 1; the checks stay on");
-            true
-        }
+    *CHECKS.get_or_init(|| {
+        super::env_choice(
+            "COCOG_SHADER_CHECKS",
+            &[("0", false), ("1", true)],
+            "the checks stay on",
+            true,
+        )
     })
 }
 

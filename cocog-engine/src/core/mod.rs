@@ -10,6 +10,7 @@ mod kernel;
 mod profiler;
 mod readback;
 mod recorder;
+mod switches;
 mod workspace;
 
 pub use buffers::{GpuBuffer, MemoryTracker};
@@ -22,4 +23,5 @@ pub use kernel::{Kernel, runtime_checks, shader};
 pub use profiler::{KernelProfiler, KernelTime};
 pub use readback::Readback;
 pub use recorder::{Bind, Recorder, UniformSlot};
+pub use switches::{env_choice, env_switch, warn_once};
 pub use workspace::Workspace;

@@ -105,23 +105,17 @@ impl ConvPath {
     /// the cocog step at 400×300 took 20.3 ms against 24.3 on tensor cores (their fastest
     /// layout) and 33.5 as implicit GEMMs, and on lavapipe F's 3×3 passes ran 1.8–2.1× faster.
     pub fn from_env() -> Self {
-        match std::env::var("COCOG_F_CONV").as_deref() {
-            Ok("tiled") => ConvPath::Tiled,
-            Ok("coop") => ConvPath::Coop,
-            Ok("gemm") => ConvPath::Gemm,
-            Ok("winograd") | Err(_) => ConvPath::Winograd,
-            Ok(other) => {
-                // Said on stderr (once a process), as the other code-path switches do, rather
-                // than refused.
-                static WARNED: std::sync::Once = std::sync::Once::new();
-                WARNED.call_once(|| {
-                    eprintln!(
-                        "COCOG_F_CONV={other}: expected gemm, tiled, winograd or coop; Winograd it is"
-                    )
-                });
-                ConvPath::Winograd
-            }
-        }
+        crate::core::env_choice(
+            "COCOG_F_CONV",
+            &[
+                ("gemm", ConvPath::Gemm),
+                ("tiled", ConvPath::Tiled),
+                ("winograd", ConvPath::Winograd),
+                ("coop", ConvPath::Coop),
+            ],
+            "Winograd it is",
+            ConvPath::Winograd,
+        )
     }
 }
 
@@ -942,20 +936,10 @@ fn chunks(w: u32, h: u32, images: u32, chunk: u32) -> impl Iterator<Item = MapSi
 /// invocation with its 75 inputs in a local array took 5.5 ms at 400×300 on an H200, so this
 /// one keeps its sums in named variables.
 pub fn direct_first_forward(ctx: &GpuContext) -> bool {
-    // Said once a process: every compositor (training, refocusing, bench) reads it.
-    static FIRST_WARNED: std::sync::Once = std::sync::Once::new();
-    let default = !ctx.is_cpu();
-    match std::env::var("COCOG_F_FIRST").as_deref() {
-        Ok("direct") => true,
-        Ok("gemm") => false,
-        Err(_) | Ok("") => default,
-        Ok(other) => {
-            FIRST_WARNED.call_once(|| {
-                eprintln!(
-                    "COCOG_F_FIRST={other}: expected gemm or direct; the adapter's default stays"
-                )
-            });
-            default
-        }
-    }
+    crate::core::env_choice(
+        "COCOG_F_FIRST",
+        &[("gemm", false), ("direct", true)],
+        "the adapter's default stays",
+        !ctx.is_cpu(),
+    )
 }

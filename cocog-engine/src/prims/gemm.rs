@@ -357,17 +357,24 @@ impl Gemm {
         let fragments = ctx.cooperative?;
         Some(match CoopBlock::from_env() {
             Ok(b) if Self::fits(ctx, b, fragments) => b,
+            // Said once a process: every product of F and the bench's report ask.
             Ok(b) => {
-                eprintln!(
-                    "COCOG_COOP_BLOCK: {b:?} needs {:?} (invocations, bytes of workgroup memory), more than {} allows; using {:?}",
-                    b.footprint(fragments),
-                    ctx.adapter_name(),
-                    CoopBlock::SQUARE
+                crate::core::warn_once(
+                    "COCOG_COOP_BLOCK",
+                    &format!(
+                        "COCOG_COOP_BLOCK: {b:?} needs {:?} (invocations, bytes of workgroup memory), more than {} allows; using {:?}",
+                        b.footprint(fragments),
+                        ctx.adapter_name(),
+                        CoopBlock::SQUARE
+                    ),
                 );
                 CoopBlock::SQUARE
             }
             Err(e) => {
-                eprintln!("{e}; using {:?}", CoopBlock::SQUARE);
+                crate::core::warn_once(
+                    "COCOG_COOP_BLOCK",
+                    &format!("{e}; using {:?}", CoopBlock::SQUARE),
+                );
                 CoopBlock::SQUARE
             }
         })

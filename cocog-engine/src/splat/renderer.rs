@@ -128,31 +128,21 @@ pub fn raster_split_for(ctx: &GpuContext) -> RasterSplit {
     } else {
         RasterSplit::Auto
     };
-    let Ok(value) = std::env::var("COCOG_RASTER_SPLIT") else {
-        return default;
-    };
-    if value == "auto" {
-        return RasterSplit::Auto;
-    }
-    match value.parse::<u32>() {
-        Ok(n) if (1..=MAX_SPLIT).contains(&n) => RasterSplit::Fixed(n),
-        // Said on stderr, as the other experimental switches do, rather than refused.
-        _ => {
-            SPLIT_WARNED.call_once(|| {
-                eprintln!(
-                    "COCOG_RASTER_SPLIT={value}: expected auto or 1 to {MAX_SPLIT}; the adapter's default stays"
-                )
-            });
-            default
-        }
-    }
+    crate::core::env_switch(
+        "COCOG_RASTER_SPLIT",
+        &format!("auto or 1 to {MAX_SPLIT}"),
+        "the adapter's default stays",
+        default,
+        |value| match value {
+            "auto" => Some(RasterSplit::Auto),
+            n => n
+                .parse::<u32>()
+                .ok()
+                .filter(|n| (1..=MAX_SPLIT).contains(n))
+                .map(RasterSplit::Fixed),
+        },
+    )
 }
-
-/// Whether an invalid `COCOG_RASTER_SPLIT` or `COCOG_RASTER_BLOCK` was said: once a process,
-/// however many renderers (training, refocusing, bench) read it.
-static SPLIT_WARNED: std::sync::Once = std::sync::Once::new();
-static BLOCK_WARNED: std::sync::Once = std::sync::Once::new();
-static SPANS_WARNED: std::sync::Once = std::sync::Once::new();
 
 /// Whether the projection and the key emission take a rectangle's rows wider than
 /// `SCAN_WIDTH` tiles as spans (tile_test.wgsl's `row_span`: a seed, two guessed ends and a
@@ -163,18 +153,12 @@ static SPANS_WARNED: std::sync::Once = std::sync::Once::new();
 /// it/s; at 100×75 they changed nothing. On lavapipe the two kernels took 7.8–9.9 ms with
 /// spans against 4.6–6.9 without. Anything but 0 or 1 is said on stderr and ignored.
 fn tile_spans(ctx: &GpuContext) -> bool {
-    let default = !ctx.is_cpu();
-    match std::env::var("COCOG_TILE_SPANS").as_deref() {
-        Err(_) | Ok("") => default,
-        Ok("0") => false,
-        Ok("1") => true,
-        Ok(other) => {
-            SPANS_WARNED.call_once(|| {
-                eprintln!("COCOG_TILE_SPANS={other}: expected 0 or 1; the adapter's default stays")
-            });
-            default
-        }
-    }
+    crate::core::env_choice(
+        "COCOG_TILE_SPANS",
+        &[("0", false), ("1", true)],
+        "the adapter's default stays",
+        !ctx.is_cpu(),
+    )
 }
 
 /// Rows up to this many tiles are scanned: a span costs a seed, four end tests and the guesses'
@@ -277,17 +261,12 @@ impl RasterBlocks {
     /// `COCOG_RASTER_BLOCK=8` or `16` puts both sides in blocks of that side (to time them
     /// against the default); unset, `DEFAULT`; anything else is said on stderr and ignored.
     pub fn from_env() -> Self {
-        match std::env::var("COCOG_RASTER_BLOCK").as_deref() {
-            Err(_) | Ok("") => Self::DEFAULT,
-            Ok("8") => Self::both(8),
-            Ok("16") => Self::both(16),
-            Ok(other) => {
-                BLOCK_WARNED.call_once(|| {
-                    eprintln!("COCOG_RASTER_BLOCK={other}: expected 8 or 16; the default stays")
-                });
-                Self::DEFAULT
-            }
-        }
+        crate::core::env_choice(
+            "COCOG_RASTER_BLOCK",
+            &[("8", Self::both(8)), ("16", Self::both(16))],
+            "the default stays",
+            Self::DEFAULT,
+        )
     }
 
     /// Said by `cocog bench`.
