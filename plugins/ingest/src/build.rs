@@ -38,6 +38,9 @@ pub(crate) struct Ingested {
     pub bounds: Option<Bounds>,
     /// The `hold=N` marker of the dataset, if present.
     pub hold_marker: Option<u32>,
+    /// Photos in the image folder that the dataset poses nowhere (a COLMAP model that did not
+    /// register them). The hold rule counts posed views only, as the reference code does.
+    pub unposed: Vec<String>,
 }
 
 pub(crate) struct Settings {
@@ -98,6 +101,36 @@ fn estimate_up(views: &[View]) -> Option<[f64; 3]> {
         })
         .sum();
     (sum.length() > 1e-9).then(|| sum.normalize().to_array())
+}
+
+/// Says which photos the hold rule skipped: on Deblur-NeRF data the held-out views are the sharp
+/// ones, and a photo the model lacks shifts every later index, so blurred photos can become
+/// test views without any other sign.
+fn warn_unposed(dataset: &Path, unposed: &[String], scene: &Scene, hold: u32, ctx: &dyn Context) {
+    const LISTED: usize = 5;
+    let mut names = unposed
+        .iter()
+        .take(LISTED)
+        .cloned()
+        .collect::<Vec<_>>()
+        .join(", ");
+    if unposed.len() > LISTED {
+        names += &format!(" and {} more", unposed.len() - LISTED);
+    }
+    let tests: Vec<&str> = scene
+        .views_in(Split::Test)
+        .map(|v| v.name.as_str())
+        .collect();
+    ctx.warn(&format!(
+        "{}: {} photo(s) in the image folder have no pose in the model ({names}); the hold rule \
+         (test views at indices that are multiples of {hold}) counts the {} posed views, as the \
+         reference code does, so the test views are {}: check they are the ones you meant to \
+         hold out (--hold N changes the rule)",
+        dataset.display(),
+        unposed.len(),
+        scene.views.len(),
+        tests.join(", ")
+    ));
 }
 
 /// Builds the scene in `out` (an existing, empty directory). Returns it and a summary.
@@ -250,6 +283,9 @@ pub(crate) fn build_scene(
     scene.points = Some("points.ply".to_owned());
     scene.save(out)?;
     let test = scene.views_in(Split::Test).count();
+    if !data.unposed.is_empty() && !use_declared && hold > 0 {
+        warn_unposed(dataset, &data.unposed, &scene, hold, ctx);
+    }
     if test == 0 {
         // Any hold > 0 makes view 0 a test view, so only these leave none.
         let why = if use_declared {

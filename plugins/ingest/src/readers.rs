@@ -121,11 +121,25 @@ pub(crate) fn from_colmap_model(
             })
         })
         .collect::<Result<Vec<_>, StageError>>()?;
+    let posed: std::collections::HashSet<&str> =
+        model.images.iter().map(|i| i.name.as_str()).collect();
+    // Advisory only: a folder that cannot be listed fails later, naming the photo it lacks.
+    let unposed = list_images(images)
+        .map(|files| {
+            files
+                .iter()
+                .filter_map(|p| p.file_name()?.to_str())
+                .filter(|name| !posed.contains(name))
+                .map(str::to_owned)
+                .collect()
+        })
+        .unwrap_or_default();
     Ok(Ingested {
         bounds: bounds_from_model(model),
         points: Some(colmap_points(model)),
         views,
         hold_marker: llff::read_hold_marker(dataset).map_err(input_error)?,
+        unposed,
     })
 }
 
@@ -182,6 +196,8 @@ pub(crate) fn read_llff(dataset: &Path) -> Result<Ingested, StageError> {
         points,
         bounds: Some(Bounds { near, far }),
         hold_marker: llff::read_hold_marker(dataset).map_err(input_error)?,
+        // One pose per photo, or the reader refused the folder.
+        unposed: Vec::new(),
     })
 }
 
@@ -264,5 +280,7 @@ pub(crate) fn read_nerf(dataset: &Path) -> Result<Ingested, StageError> {
         points,
         bounds: None,
         hold_marker: llff::read_hold_marker(dataset).map_err(input_error)?,
+        // transforms.json names its frames; other files beside them are not its photos.
+        unposed: Vec::new(),
     })
 }

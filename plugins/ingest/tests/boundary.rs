@@ -203,3 +203,59 @@ fn a_hold_zero_marker_trains_on_every_view_and_warns() {
         "{logs:?}"
     );
 }
+
+#[test]
+fn photos_the_model_does_not_pose_are_named_with_the_test_views_they_shift() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = tmp.path().join("scene");
+    let names = ["a.png", "b.png", "c.png", "d.png", "e.png"];
+    for n in names {
+        png(&scene.join("images").join(n));
+    }
+    // b.png is on disk but not in the model: the hold rule counts a, c, d, e.
+    let model = Model {
+        cameras: vec![Camera {
+            id: 1,
+            model: CameraModel::Pinhole,
+            width: 8,
+            height: 6,
+            params: vec![10.0, 10.0, 4.0, 3.0],
+        }],
+        images: [(1, "a.png"), (3, "c.png"), (4, "d.png"), (5, "e.png")]
+            .map(|(id, name)| Image {
+                id,
+                qvec: [1.0, 0.0, 0.0, 0.0],
+                tvec: [0.0, 0.0, 4.0 + f64::from(id)],
+                camera_id: 1,
+                name: name.into(),
+                points2d: vec![],
+            })
+            .to_vec(),
+        points: vec![],
+    };
+    std::fs::create_dir_all(scene.join("sparse/0")).unwrap();
+    colmap::write_bin(&model, &scene.join("sparse/0")).unwrap();
+    let warned = |options: Value| {
+        let ctx = Recorder::default();
+        run("ingest-colmap", &scene, options, &ctx).unwrap();
+        let logs = ctx.0.lock().unwrap();
+        logs.iter()
+            .find(|(level, m)| *level == LogLevel::Warn && m.contains("no pose"))
+            .map(|(_, m)| m.clone())
+    };
+    let m = warned(json!({"hold": 2})).expect("no warning about b.png");
+    for part in [
+        "b.png",
+        "multiples of 2",
+        "4 posed views",
+        "a.png, d.png",
+        "--hold",
+    ] {
+        assert!(m.contains(part), "expected {part:?} in: {m}");
+    }
+    // Every view training has no test views to shift.
+    assert_eq!(warned(json!({"hold": 0})), None);
+    // A model posing every photo says nothing.
+    std::fs::remove_file(scene.join("images/b.png")).unwrap();
+    assert_eq!(warned(json!({"hold": 2})), None);
+}
