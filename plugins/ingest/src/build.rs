@@ -160,6 +160,7 @@ pub(crate) fn build_scene(
     let use_declared = settings.hold.is_none() && declared;
     let n = data.views.len() as u64;
     let mut scene = Scene::default();
+    let mut written = std::collections::HashSet::new();
     for (i, raw) in data.views.iter().enumerate() {
         ctx.check_cancelled()?;
         ctx.progress("check images", i as u64, n);
@@ -202,13 +203,18 @@ pub(crate) fn build_scene(
                 }
                 (absolute(&pre), size)
             } else {
-                let rel = format!(
-                    "images/{}.png",
-                    raw.name
-                        .replace(['/', '\\'], "_")
-                        .rsplit_once('.')
-                        .map_or(raw.name.as_str(), |(stem, _)| stem)
-                );
+                let flat = raw.name.replace(['/', '\\'], "_");
+                let base = flat
+                    .rsplit_once('.')
+                    .map_or(flat.as_str(), |(stem, _)| stem);
+                // `001.png` and `001.jpg`, or `a/x.png` and `a_x.png`, flatten alike: each view
+                // keeps a photo of its own.
+                let mut rel = format!("images/{base}.png");
+                let mut k = 1;
+                while !written.insert(rel.clone()) {
+                    rel = format!("images/{base}-{k}.png");
+                    k += 1;
+                }
                 let dst = out.join(&rel);
                 std::fs::create_dir_all(out.join("images"))
                     .map_err(|e| StageError::io(out.join("images"), e))?;

@@ -259,3 +259,44 @@ fn photos_the_model_does_not_pose_are_named_with_the_test_views_they_shift() {
     std::fs::remove_file(scene.join("images/b.png")).unwrap();
     assert_eq!(warned(json!({"hold": 2})), None);
 }
+
+#[test]
+fn downscaled_photos_whose_names_flatten_alike_stay_apart() {
+    let tmp = nerf_scene(&[
+        "images/x.png",
+        "images/x.jpg",
+        "images/a/b.png",
+        "images/a_b.png",
+    ]);
+    let scene = tmp.path().join("scene");
+    let stage = cocog_ingest::stages()
+        .into_iter()
+        .find(|s| s.info().name == "ingest-nerf")
+        .unwrap();
+    let info = stage.info();
+    let options = Options::validate(
+        &info.name,
+        &info.options,
+        &serde_json::Map::from_iter([("downscale".to_owned(), json!(2))]),
+    )
+    .unwrap();
+    let out = tempfile::tempdir().unwrap();
+    stage
+        .run(
+            &StageRequest {
+                input: scene,
+                output: out.path().to_path_buf(),
+                options,
+            },
+            &Recorder::default(),
+        )
+        .unwrap();
+    let written = cocog_pipeline::Scene::load(out.path()).unwrap();
+    let mut images: Vec<&str> = written.views.iter().map(|v| v.image.as_str()).collect();
+    images.sort();
+    images.dedup();
+    assert_eq!(images.len(), 4, "two views share a photo: {images:?}");
+    for image in images {
+        assert!(out.path().join(image).is_file(), "{image} missing");
+    }
+}
