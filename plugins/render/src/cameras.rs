@@ -25,6 +25,36 @@ impl NamedCamera {
     }
 }
 
+/// Output file stems for `cams`, one each and all different: the view's stem, or where views
+/// share it (NeRF-synthetic's `train/r_0.png` and `test/r_0.png`) its whole name without the
+/// extension, folders joined by `_`, and an index past that, so no render overwrites another
+/// and renders still pair with their photos by name.
+pub fn output_stems(cams: &[NamedCamera]) -> Vec<String> {
+    let mut shared = std::collections::HashMap::new();
+    for c in cams {
+        *shared.entry(c.stem()).or_insert(0u32) += 1;
+    }
+    let mut used = std::collections::HashSet::new();
+    cams.iter()
+        .map(|c| {
+            let stem = c.stem();
+            let base = if shared[&stem] == 1 {
+                stem
+            } else {
+                let whole = c.name.rsplit_once('.').map_or(c.name.as_str(), |(s, _)| s);
+                whole.replace(['/', '\\'], "_")
+            };
+            let mut name = base.clone();
+            let mut k = 1;
+            while !used.insert(name.clone()) {
+                name = format!("{base}-{k}");
+                k += 1;
+            }
+            name
+        })
+        .collect()
+}
+
 /// `test`, `train` or `all` (None) from an option value.
 pub fn parse_split(value: &str) -> Result<Option<Split>, StageError> {
     match value {
@@ -101,4 +131,48 @@ pub fn split_cameras(
             })
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn named(name: &str) -> NamedCamera {
+        let mut pose = [[0.0; 4]; 4];
+        (0..4).for_each(|i| pose[i][i] = 1.0);
+        NamedCamera {
+            name: name.to_owned(),
+            image: PathBuf::from(name),
+            camera: Camera {
+                fx: 1.0,
+                fy: 1.0,
+                cx: 1.0,
+                cy: 1.0,
+                width: 2,
+                height: 2,
+                world_from_camera: pose,
+            },
+        }
+    }
+
+    #[test]
+    fn views_that_share_a_stem_get_distinct_output_names() {
+        let cams: Vec<_> = [
+            "train/r_0.png",
+            "test/r_0.png",
+            "r_1.png",
+            "a.png",
+            "a.png",
+            "test_r_0.jpg",
+        ]
+        .map(named)
+        .into();
+        assert_eq!(
+            output_stems(&cams),
+            ["train_r_0", "test_r_0", "r_1", "a", "a-1", "test_r_0-1"]
+        );
+        // Unique stems stay the plain stems that pair with photos by name.
+        let plain: Vec<_> = ["000.png", "008.png"].map(named).into();
+        assert_eq!(output_stems(&plain), ["000", "008"]);
+    }
 }

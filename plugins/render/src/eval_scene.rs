@@ -26,11 +26,12 @@ fn ground_truth(
     let mut scene = cocog_pipeline::Scene::load(scene_dir)?;
     scene.rebase(scene_dir)?;
     let views = split_cameras(&scene, scene_dir, job.split, job.downscale)?;
-    for (i, view) in views.iter().enumerate() {
+    let stems = crate::cameras::output_stems(&views);
+    for (i, (view, stem)) in views.iter().zip(&stems).enumerate() {
         ctx.check_cancelled()?;
         ctx.progress("ground truth", i as u64, views.len() as u64);
         // write_downscaled always encodes PNG (lossless, even for a JPEG photo at factor 1).
-        let dst = out.join(format!("{}.png", view.stem()));
+        let dst = out.join(format!("{stem}.png"));
         let (w, h) = write_downscaled_over(&view.image, &dst, job.downscale, Some(job.background))
             .map_err(|e| StageError::Input(format!("view {:?}: {e}", view.name)))?;
         if (w, h) != (view.camera.width, view.camera.height) {
@@ -43,7 +44,10 @@ fn ground_truth(
             )));
         }
     }
-    Ok(views.into_iter().map(|v| (v.stem(), v.image)).collect())
+    Ok(stems
+        .into_iter()
+        .zip(views.into_iter().map(|v| v.image))
+        .collect())
 }
 
 /// The report names the scratch folders, which are gone once the stage returns: point at the

@@ -162,9 +162,10 @@ pub(crate) fn render_views(
     let mut lenses = Vec::new();
     // A sweep renders its one view once per focus distance, into numbered frames.
     let frames: Vec<(String, &NamedCamera, Option<RefocusJob>)> = if job.sweep.is_empty() {
-        cameras
-            .iter()
-            .map(|v| (v.stem(), v, job.refocus.clone()))
+        crate::cameras::output_stems(&cameras)
+            .into_iter()
+            .zip(&cameras)
+            .map(|(stem, v)| (stem, v, job.refocus.clone()))
             .collect()
     } else {
         let base = job.refocus.clone().ok_or_else(|| {
