@@ -158,6 +158,16 @@ pub(crate) fn build_scene(
     let declared = data.views.iter().all(|v| v.split.is_some());
     let hold = settings.hold.or(data.hold_marker).unwrap_or(8);
     let use_declared = settings.hold.is_none() && declared;
+    let some = data.views.iter().filter(|v| v.split.is_some()).count();
+    if settings.hold.is_none() && !declared && some > 0 {
+        let missing = data.views.iter().find(|v| v.split.is_none());
+        ctx.warn(&format!(
+            "{some} of {} views declare a split, but not all ({} has none): the hold rule \
+             decides every view's split instead",
+            data.views.len(),
+            missing.map_or("one", |v| v.source.as_str())
+        ));
+    }
     let n = data.views.len() as u64;
     let mut scene = Scene::default();
     let mut written = std::collections::HashSet::new();

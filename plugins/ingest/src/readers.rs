@@ -225,10 +225,18 @@ pub(crate) fn read_nerf(dataset: &Path) -> Result<Ingested, StageError> {
                 .camera
                 .pinhole(f64::from(size.0), f64::from(size.1))
                 .map_err(|e| StageError::Input(format!("{source}: {e}")))?;
+            // A held-out frame is one no training sees, whatever the file calls it; a value
+            // read as neither would quietly hand the whole split to the hold rule.
             let split = match f.split.as_deref() {
-                Some("test") => Some(Split::Test),
+                Some("test" | "val") => Some(Split::Test),
                 Some("train") => Some(Split::Train),
-                _ => None,
+                None => None,
+                Some(other) => {
+                    return Err(StageError::Input(format!(
+                        "{source}: split: expected \"train\" or \"test\" (\"val\" is held out \
+                         too), got {other:?}"
+                    )));
+                }
             };
             let rel = f.file_path.trim_start_matches("./");
             let name = if Path::new(rel).extension().is_none() {

@@ -300,3 +300,49 @@ fn downscaled_photos_whose_names_flatten_alike_stay_apart() {
         assert!(out.path().join(image).is_file(), "{image} missing");
     }
 }
+
+#[test]
+fn a_split_value_that_is_neither_train_nor_test_is_refused_and_a_partial_split_said() {
+    let tmp = nerf_scene(&["images/a.png", "images/b.png", "images/c.png"]);
+    let scene = tmp.path().join("scene");
+    let with_splits = |splits: [Option<&str>; 3]| {
+        let frames: Vec<Value> = splits
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                let mut f = json!({
+                    "file_path": format!("images/{}.png", ["a", "b", "c"][i]),
+                    "transform_matrix": pose(4.0 + i as f64),
+                });
+                if let Some(s) = s {
+                    f["split"] = json!(s);
+                }
+                f
+            })
+            .collect();
+        let doc = json!({"fl_x": 10.0, "w": 8, "h": 6, "frames": frames});
+        std::fs::write(scene.join("transforms.json"), doc.to_string()).unwrap();
+    };
+    with_splits([Some("train"), Some("Test"), Some("test")]);
+    let e = err("ingest-nerf", &scene, json!({}));
+    for part in ["transforms.json", "frames[1]", "split", "\"Test\""] {
+        assert!(e.contains(part), "expected {part:?} in: {e}");
+    }
+    with_splits([Some("train"), Some("val"), Some("test")]);
+    let summary = run("ingest-nerf", &scene, json!({}), &Recorder::default()).unwrap();
+    assert_eq!(
+        (summary["split"].as_str(), summary["test"].as_u64()),
+        (Some("dataset"), Some(2))
+    );
+    with_splits([Some("train"), None, Some("test")]);
+    let ctx = Recorder::default();
+    let summary = run("ingest-nerf", &scene, json!({}), &ctx).unwrap();
+    assert_eq!(summary["split"], "hold=8");
+    let logs = ctx.0.lock().unwrap();
+    assert!(
+        logs.iter().any(|(level, m)| *level == LogLevel::Warn
+            && m.contains("2 of 3 views declare a split")
+            && m.contains("frames[1]")),
+        "{logs:?}"
+    );
+}
