@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::scene::MANIFEST;
+use crate::scene::{MANIFEST, Scene};
 use crate::stage::OutputKind;
 
 /// Written into every folder output the runner commits, so a later `--force` knows it.
@@ -27,6 +27,16 @@ pub fn refusal(output: &Path, input: &Path, kind: OutputKind) -> Option<String> 
             input.display()
         ));
     }
+    if let Some(used) = input_files(input)
+        .into_iter()
+        .find(|f| canonical(f).starts_with(&here))
+    {
+        return Some(format!(
+            "it is or holds {}, which the input {} uses",
+            used.display(),
+            input.display()
+        ));
+    }
     match kind {
         OutputKind::File if meta.is_dir() => Some(
             "it is a folder, and this stage writes one file: name the file, e.g. \
@@ -35,8 +45,8 @@ pub fn refusal(output: &Path, input: &Path, kind: OutputKind) -> Option<String> 
         ),
         OutputKind::File if written_by_cocog(output) => None,
         OutputKind::File => Some(
-            "it is not a file of a format cocog writes (PLY, GLB or JSON); remove it yourself \
-             or choose another output"
+            "it is not a file of a format cocog writes (PLY, GLB, SPZ or JSON); remove it \
+             yourself or choose another output"
                 .to_owned(),
         ),
         OutputKind::Dir if !meta.is_dir() => {
@@ -61,6 +71,38 @@ fn written_by_cocog(file: &Path) -> bool {
     head.starts_with(b"ply\n")
         || head.starts_with(b"glTF")
         || head.trim_ascii_start().starts_with(b"{")
+        || (head.starts_with(&[0x1f, 0x8b]) && is_spz(file))
+}
+
+/// SPZ is one gzip stream, so the magic that says cocog wrote it is inside the compression;
+/// a dynamic Huffman table can precede it by more than `head` holds, so this reads the file.
+fn is_spz(file: &Path) -> bool {
+    use std::io::Read;
+    const MAGIC: [u8; 4] = 0x5053_474e_u32.to_le_bytes();
+    let mut magic = [0u8; 4];
+    std::fs::File::open(file)
+        .and_then(|f| flate2::read::GzDecoder::new(f).read_exact(&mut magic))
+        .is_ok_and(|()| magic == MAGIC)
+}
+
+/// The files a scene input reads: its manifest and every path the manifest names. A single
+/// file or a dataset folder names none, so only the checks on the input path itself apply.
+fn input_files(input: &Path) -> Vec<PathBuf> {
+    let manifest = input.join(MANIFEST);
+    if !manifest.is_file() {
+        return Vec::new();
+    }
+    let mut files = vec![manifest];
+    // A manifest that does not load fails its stage before anything is replaced.
+    if let Ok(s) = Scene::load(input) {
+        let photos = s.views.into_iter().flat_map(|v| [Some(v.image), v.depth]);
+        let named = [s.points, s.gaussians, s.lens_model]
+            .into_iter()
+            .chain(photos)
+            .flatten();
+        files.extend(named.map(|p| Scene::resolve(input, &p)));
+    }
+    files
 }
 
 /// A scene written before outputs carried the marker.
@@ -131,6 +173,96 @@ mod tests {
         let why = refusal(t, &input, OutputKind::Dir).unwrap();
         assert!(why.contains("input"), "{why}");
         assert_eq!(refusal(&t.join("absent"), &input, OutputKind::Dir), None);
+    }
+
+    /// A scene in `dir` whose one view's photo is `image`, as ingest stores it.
+    fn scene_with_photo(dir: &Path, image: &Path) {
+        let mut scene = Scene::default();
+        scene.cameras.push(crate::scene::Camera {
+            id: 0,
+            width: 4,
+            height: 4,
+            fx: 4.0,
+            fy: 4.0,
+            cx: 2.0,
+            cy: 2.0,
+        });
+        let mut pose = [[0.0; 4]; 4];
+        (0..4).for_each(|i| pose[i][i] = 1.0);
+        scene.views.push(crate::scene::View {
+            name: "000.png".to_owned(),
+            image: image.display().to_string(),
+            camera: 0,
+            world_from_camera: pose,
+            split: crate::scene::Split::Train,
+            lens: None,
+            depth: None,
+        });
+        scene.gaussians = Some("gaussians.ply".to_owned());
+        std::fs::create_dir_all(dir).unwrap();
+        scene.save(dir).unwrap();
+    }
+
+    #[test]
+    fn files_the_input_uses_are_not_replaced() {
+        let tmp = tempfile::tempdir().unwrap();
+        let t = tmp.path();
+        // Scene `a` (marked, so replaceable on its own) holds the photo scene `b` uses.
+        let a = t.join("a");
+        std::fs::create_dir_all(a.join("images")).unwrap();
+        std::fs::write(a.join(MARKER), b"").unwrap();
+        let photo = a.join("images").join("000.png");
+        std::fs::write(&photo, b"png").unwrap();
+        let b = t.join("b");
+        scene_with_photo(&b, &photo);
+        std::fs::write(b.join("gaussians.ply"), b"ply\n").unwrap();
+        let why = refusal(&a, &b, OutputKind::Dir).unwrap();
+        assert!(why.contains("000.png"), "{why}");
+        // The input's own manifest and a model file it names (relative to it).
+        let why = refusal(&b.join(MANIFEST), &b, OutputKind::File).unwrap();
+        assert!(why.contains(MANIFEST), "{why}");
+        let why = refusal(&b.join("gaussians.ply"), &b, OutputKind::File).unwrap();
+        assert!(why.contains("gaussians.ply"), "{why}");
+        // What the scene does not name, e.g. eval's default metrics.json, stays replaceable.
+        let metrics = b.join("metrics.json");
+        std::fs::write(&metrics, b"{\"psnr\": 1}").unwrap();
+        assert_eq!(refusal(&metrics, &b, OutputKind::File), None);
+        // A single-file input names nothing: only the input itself is guarded.
+        let why = refusal(&a, &photo, OutputKind::Dir).unwrap();
+        assert!(why.contains("input"), "{why}");
+        assert_eq!(refusal(&a, &metrics, OutputKind::Dir), None);
+    }
+
+    #[test]
+    fn spz_cocog_wrote_is_replaceable() {
+        let tmp = tempfile::tempdir().unwrap();
+        let input = tmp.path().join("in");
+        // Enough varied splats that the gzip stream opens with a dynamic Huffman table.
+        let n = 500;
+        let wave = |len: usize| {
+            (0..len)
+                .map(|i| (i as f32 * 0.37).sin())
+                .collect::<Vec<_>>()
+        };
+        let splats = cocog_formats::Splats {
+            means: wave(3 * n),
+            log_scales: wave(3 * n).iter().map(|v| v - 4.0).collect(),
+            rotations: wave(4 * n),
+            opacities: wave(n),
+            sh_dc: wave(3 * n),
+            sh_rest: wave(3 * 15 * n),
+            sh_degree: 3,
+        };
+        let spz = tmp.path().join("scene.spz");
+        cocog_formats::spz::write_spz(&spz, &splats).unwrap();
+        assert_eq!(refusal(&spz, &input, OutputKind::File), None);
+        // A gzip stream of anything else is not cocog's.
+        let other = tmp.path().join("backup.gz");
+        let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+        std::io::Write::write_all(&mut gz, b"my thesis, compressed").unwrap();
+        std::fs::write(&other, gz.finish().unwrap()).unwrap();
+        let why = refusal(&other, &input, OutputKind::File).unwrap();
+        assert!(why.contains("SPZ"), "{why}");
     }
 
     #[cfg(unix)]
