@@ -46,13 +46,12 @@ impl Renderer {
             .rev()
             .map(|b| (b * most, most.min(h - b * most)))
             .collect();
-        let pixels = w as usize * h as usize;
         let mut image = RenderedImage {
             width: w,
             height: h,
-            color: Vec::with_capacity(pixels),
-            alpha: Vec::with_capacity(pixels),
-            depth: Vec::with_capacity(pixels),
+            color: frame_buffer(w, h, "colour")?,
+            alpha: frame_buffer(w, h, "alpha")?,
+            depth: frame_buffer(w, h, "depth")?,
         };
         let mut bands = 0;
         while let Some((first_row, rows)) = todo.pop() {
@@ -82,4 +81,19 @@ impl Renderer {
         }
         Ok(Frame { image, bands })
     }
+}
+
+/// Room for one value a pixel, or an error: a camera of absurd size (a typo in scene.json)
+/// would otherwise abort the process on the allocation, leaving its scratch folders behind.
+fn frame_buffer<T>(w: u32, h: u32, what: &str) -> Result<Vec<T>, EngineError> {
+    let pixels = w as usize * h as usize;
+    let mut v = Vec::new();
+    v.try_reserve_exact(pixels).map_err(|_| {
+        EngineError::Invalid(format!(
+            "a {w}×{h} frame needs {:.1} GB of host memory for its {what} alone, which this \
+             machine cannot allocate: check the camera's width and height",
+            (pixels * std::mem::size_of::<T>()) as f64 / 1e9
+        ))
+    })?;
+    Ok(v)
 }
