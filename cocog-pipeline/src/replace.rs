@@ -95,12 +95,7 @@ fn input_files(input: &Path) -> Vec<PathBuf> {
     let mut files = vec![manifest];
     // A manifest that does not load fails its stage before anything is replaced.
     if let Ok(s) = Scene::load(input) {
-        let photos = s.views.into_iter().flat_map(|v| [Some(v.image), v.depth]);
-        let named = [s.points, s.gaussians, s.lens_model]
-            .into_iter()
-            .chain(photos)
-            .flatten();
-        files.extend(named.map(|p| Scene::resolve(input, &p)));
+        files.extend(s.paths().map(|p| Scene::resolve(input, p)));
     }
     files
 }

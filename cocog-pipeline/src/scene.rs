@@ -212,15 +212,36 @@ impl Scene {
             path: dir.to_path_buf(),
             source,
         })?;
-        let abs = |p: &mut String| *p = Self::resolve(&dir, p).display().to_string();
-        for v in &mut self.views {
-            abs(&mut v.image);
-            v.depth.as_mut().map(abs);
+        for p in self.paths_mut() {
+            *p = Self::resolve(&dir, p).display().to_string();
         }
-        self.points.as_mut().map(abs);
-        self.gaussians.as_mut().map(abs);
-        self.lens_model.as_mut().map(abs);
         Ok(())
+    }
+
+    /// Every file path the manifest names: the models, then each view's photo and depth map.
+    /// Code that resolves or protects a scene's files goes through here, so a new path field
+    /// cannot be missed by one of them.
+    pub fn paths(&self) -> impl Iterator<Item = &String> {
+        let views = self
+            .views
+            .iter()
+            .flat_map(|v| std::iter::once(&v.image).chain(v.depth.as_ref()));
+        [&self.points, &self.gaussians, &self.lens_model]
+            .into_iter()
+            .flatten()
+            .chain(views)
+    }
+
+    /// `paths`, to rewrite them.
+    pub fn paths_mut(&mut self) -> impl Iterator<Item = &mut String> {
+        let views = self.views.iter_mut().flat_map(|v| {
+            let View { image, depth, .. } = v;
+            std::iter::once(image).chain(depth.as_mut())
+        });
+        [&mut self.points, &mut self.gaussians, &mut self.lens_model]
+            .into_iter()
+            .flatten()
+            .chain(views)
     }
 
     /// The colour the last training run composited photos over and rendered its Gaussians
