@@ -170,7 +170,8 @@ impl Scene {
             source,
         })?;
         check_header(&path, &raw)?;
-        let scene: Self = serde_json::from_value(raw).map_err(|source| SceneError::Parse {
+        // From the text again, not from `raw`: serde_json then says the line and column.
+        let scene: Self = serde_json::from_str(&text).map_err(|source| SceneError::Parse {
             path: path.clone(),
             source,
         })?;

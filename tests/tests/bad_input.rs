@@ -66,6 +66,24 @@ fn corrupt_manifest() {
 }
 
 #[test]
+fn a_manifest_field_of_the_wrong_shape_is_located() {
+    let work = tempfile::tempdir().expect("tempdir");
+    let input = work.path().join("scene");
+    write_tiny_scene(&input, 4, [0.0; 3], 1.0);
+    let path = input.join("scene.json");
+    let mut doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).expect("read")).expect("json");
+    doc["views"][1]["world_from_camera"]
+        .as_array_mut()
+        .expect("pose rows")
+        .pop();
+    std::fs::write(&path, serde_json::to_string_pretty(&doc).expect("json")).expect("write");
+    let out = recenter(&input, &work.path().join("out"), &[]);
+    // Pretty-printed, the line points at the view; the bare serde message said nothing of where.
+    assert_one_line_error(&out, &["scene/scene.json", "invalid length 3", "line"]);
+}
+
+#[test]
 fn unknown_major_version() {
     let work = tempfile::tempdir().expect("tempdir");
     let input = work.path().join("scene");
