@@ -211,6 +211,16 @@ impl TrainState {
     /// `checkpoint/`, or the state file itself.
     pub fn load(path: &Path) -> Result<Self, CheckpointError> {
         let file = locate(path);
+        if path.is_dir() && !file.is_file() {
+            return Err(CheckpointError::Format {
+                path: path.to_path_buf(),
+                why: format!(
+                    "it holds no {CHECKPOINT_FILE} (nor checkpoint/{CHECKPOINT_FILE}): resume from \
+                     a train output that kept its checkpoint, an OUTPUT.checkpoint folder, or \
+                     the state file itself"
+                ),
+            });
+        }
         let data = std::fs::read(&file).map_err(|source| CheckpointError::Io {
             path: file.clone(),
             source,
@@ -542,7 +552,10 @@ mod tests {
     fn a_wrong_file_is_named_with_what_is_wrong() {
         let dir = tempfile::tempdir().unwrap();
         let missing = TrainState::load(dir.path()).unwrap_err().to_string();
-        assert!(missing.contains(CHECKPOINT_FILE), "{missing}");
+        assert!(
+            missing.contains(CHECKPOINT_FILE) && missing.contains("a train output"),
+            "{missing}"
+        );
         let file = dir.path().join(CHECKPOINT_FILE);
         std::fs::write(&file, b"not safetensors").unwrap();
         let bad = TrainState::load(&file).unwrap_err().to_string();
