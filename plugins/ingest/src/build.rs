@@ -103,6 +103,29 @@ fn estimate_up(views: &[View]) -> Option<[f64; 3]> {
     (sum.length() > 1e-9).then(|| sum.normalize().to_array())
 }
 
+/// Says when a dataset's `images_N/` was there but not used for every photo: its names must
+/// match `images/`'s (stock LLFF scenes rename them), and the rest were resampled, which is
+/// what the reference code does anyway but not what a user who made `images_N/` expects.
+fn warn_resampled(
+    dataset: &Path,
+    factor: u32,
+    resampled: &[&str],
+    views: usize,
+    ctx: &dyn Context,
+) {
+    let dir = dataset.join(format!("images_{factor}"));
+    if resampled.is_empty() || !dir.is_dir() {
+        return;
+    }
+    ctx.warn(&format!(
+        "{}: {} of {views} photos have no file of the same name there (first: {}); those were \
+         area-downscaled from the full-size photos instead",
+        dir.display(),
+        resampled.len(),
+        resampled[0]
+    ));
+}
+
 /// Says which photos the hold rule skipped: on Deblur-NeRF data the held-out views are the sharp
 /// ones, and a photo the model lacks shifts every later index, so blurred photos can become
 /// test views without any other sign.
@@ -158,6 +181,17 @@ pub(crate) fn build_scene(
     let declared = data.views.iter().all(|v| v.split.is_some());
     let hold = settings.hold.or(data.hold_marker).unwrap_or(8);
     let use_declared = settings.hold.is_none() && declared;
+    if hold == 1 && !use_declared {
+        let from = if settings.hold.is_some() {
+            "--hold 1".to_owned()
+        } else {
+            format!("{}'s hold=1 marker", dataset.display())
+        };
+        return Err(StageError::Input(format!(
+            "{from} makes every view a test view, leaving none to train on: use --hold 8 (every \
+             8th view held out) or --hold 0 (every view trains)"
+        )));
+    }
     let some = data.views.iter().filter(|v| v.split.is_some()).count();
     if settings.hold.is_none() && !declared && some > 0 {
         let missing = data.views.iter().find(|v| v.split.is_none());
@@ -171,6 +205,7 @@ pub(crate) fn build_scene(
     let n = data.views.len() as u64;
     let mut scene = Scene::default();
     let mut written = std::collections::HashSet::new();
+    let mut resampled = Vec::new();
     for (i, raw) in data.views.iter().enumerate() {
         ctx.check_cancelled()?;
         ctx.progress("check images", i as u64, n);
@@ -213,6 +248,7 @@ pub(crate) fn build_scene(
                 }
                 (absolute(&pre), size)
             } else {
+                resampled.push(raw.name.as_str());
                 let flat = raw.name.replace(['/', '\\'], "_");
                 let base = flat
                     .rsplit_once('.')
@@ -276,6 +312,13 @@ pub(crate) fn build_scene(
         });
     }
     ctx.progress("check images", n, n);
+    warn_resampled(
+        dataset,
+        settings.downscale,
+        &resampled,
+        data.views.len(),
+        ctx,
+    );
     scene.up = estimate_up(&scene.views);
     scene.bounds = data.bounds;
     let from_dataset = data.points.as_ref().is_some_and(|c| !c.is_empty());

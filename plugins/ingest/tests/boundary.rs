@@ -346,3 +346,25 @@ fn a_split_value_that_is_neither_train_nor_test_is_refused_and_a_partial_split_s
         "{logs:?}"
     );
 }
+
+#[test]
+fn hold_one_is_refused_and_a_partial_images_n_folder_is_said() {
+    let tmp = nerf_scene(&["images/a.png", "images/b.png", "images/c.png"]);
+    let scene = tmp.path().join("scene");
+    let e = err("ingest-nerf", &scene, json!({"hold": 1}));
+    assert!(e.contains("--hold 1") && e.contains("--hold 8"), "{e}");
+    std::fs::create_dir_all(scene.join("images_2")).unwrap();
+    image::RgbImage::new(4, 3)
+        .save(scene.join("images_2/a.png"))
+        .unwrap();
+    let ctx = Recorder::default();
+    run("ingest-nerf", &scene, json!({"downscale": 2}), &ctx).unwrap();
+    let logs = ctx.0.lock().unwrap();
+    assert!(
+        logs.iter().any(|(level, m)| *level == LogLevel::Warn
+            && m.contains("images_2")
+            && m.contains("2 of 3 photos")
+            && m.contains("b.png")),
+        "{logs:?}"
+    );
+}
