@@ -374,3 +374,110 @@ fn nan_pose_is_refused() {
         "{err}"
     );
 }
+
+#[test]
+fn duplicate_ids_are_refused_naming_file_and_id() {
+    let model = synthetic_model();
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // Each record kind, in each encoding: the second record takes the first one's id.
+    type Spoil = fn(&mut Model) -> String;
+    let cases: [(&str, Spoil, &str); 3] = [
+        (
+            "cameras",
+            |m| {
+                m.cameras[1].id = m.cameras[0].id;
+                m.cameras[1].params[0] += 1.0;
+                format!("duplicate camera id {}", m.cameras[0].id)
+            },
+            "CAMERA_ID",
+        ),
+        (
+            "images",
+            |m| {
+                m.images[3].id = m.images[1].id;
+                format!("duplicate image id {}", m.images[1].id)
+            },
+            "IMAGE_ID",
+        ),
+        (
+            "points3D",
+            |m| {
+                m.points[2].id = m.points[3].id;
+                format!("duplicate point3D id {}", m.points[3].id)
+            },
+            "POINT3D_ID",
+        ),
+    ];
+    for (stem, spoil, txt_field) in cases {
+        let mut bad = model.clone();
+        let expect = spoil(&mut bad);
+        colmap::write_bin(&bad, d).unwrap();
+        let err = colmap::read_bin(d).unwrap_err().to_string();
+        assert!(
+            err.contains(&format!("{stem}.bin")) && err.contains(&expect),
+            "{err}"
+        );
+        colmap::write_txt(&bad, d).unwrap();
+        let err = colmap::read_txt(d).unwrap_err().to_string();
+        assert!(
+            err.contains(&format!("{stem}.txt"))
+                && err.contains(txt_field)
+                && err.contains(&expect)
+                && err.contains("line "),
+            "{err}"
+        );
+    }
+    // The same id in two different files is not a duplicate (ids are per kind).
+    let mut ok = model;
+    ok.points[0].id = u64::from(ok.images[0].id);
+    colmap::write_bin(&ok, d).unwrap();
+    assert_eq!(colmap::read_bin(d).unwrap(), ok);
+}
+
+#[test]
+fn text_files_with_a_byte_order_mark_read() {
+    let model = synthetic_model();
+    let dir = tempfile::tempdir().unwrap();
+    colmap::write_txt(&model, dir.path()).unwrap();
+    for file in ["cameras.txt", "images.txt", "points3D.txt"] {
+        let path = dir.path().join(file);
+        let text = std::fs::read_to_string(&path).unwrap();
+        // Without the comment header the BOM sits right before the first record's id.
+        let data: String = text
+            .lines()
+            .filter(|l| !l.starts_with('#'))
+            .map(|l| format!("{l}\n"))
+            .collect();
+        std::fs::write(&path, format!("\u{feff}{data}")).unwrap();
+    }
+    assert_eq!(colmap::read_txt(dir.path()).unwrap(), model);
+    // A BOM anywhere else is still an error.
+    let cams = dir.path().join("cameras.txt");
+    let text = std::fs::read_to_string(&cams).unwrap();
+    std::fs::write(&cams, text.replacen('\n', "\n\u{feff}", 1)).unwrap();
+    let err = colmap::read_txt(dir.path()).unwrap_err().to_string();
+    assert!(
+        err.contains("cameras.txt") && err.contains("line 2"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_camera_line_one_field_short_says_which_fields() {
+    let dir = tempfile::tempdir().unwrap();
+    colmap::write_txt(&synthetic_model(), dir.path()).unwrap();
+    // HEIGHT is missing: the four parameters shift left and look like three.
+    std::fs::write(
+        dir.path().join("cameras.txt"),
+        "1 PINHOLE 640 500 500 320 240\n",
+    )
+    .unwrap();
+    let err = colmap::read_txt(dir.path()).unwrap_err().to_string();
+    assert!(
+        err.contains("line 1")
+            && err.contains("CAMERA_ID MODEL WIDTH HEIGHT, 8 fields in all; the line has 7")
+            && err.contains("HEIGHT or a parameter missing"),
+        "{err}"
+    );
+}

@@ -225,7 +225,14 @@ fn bad_plys_are_refused_clearly() {
     let bytes = std::fs::read(&good).unwrap();
     let cut = write_raw(d, "cut.ply", &bytes[..bytes.len() - 7]);
     let e = read_splats(&cut).unwrap_err().to_string();
-    assert!(e.contains("cut.ply") && e.contains("vertex data"), "{e}");
+    assert!(
+        e.contains("cut.ply")
+            && e.contains("element vertex")
+            && e.contains("10 declared vertices")
+            && e.contains("need 1040 bytes")
+            && e.contains("only 1033 remain"),
+        "{e}"
+    );
     let text = String::from_utf8_lossy(&bytes).replace("property float f_rest_8\n", "");
     let header_only = &text[..text.find("end_header\n").unwrap() + 11];
     let odd = write_raw(
@@ -249,7 +256,10 @@ fn bad_plys_are_refused_clearly() {
         .concat(),
     );
     let e = read_splats(&huge).unwrap_err().to_string();
-    assert!(e.contains("cannot fit"), "{e}");
+    assert!(
+        e.contains("99999999999 declared vertices") && e.contains("truncated"),
+        "{e}"
+    );
     // Property-less rows before the vertex cost no bytes but one loop turn each; fuzzing found
     // four billion of them hang the reader.
     let empty_rows = write_raw(
@@ -332,5 +342,281 @@ PlyData([PlyElement.describe(arr, 'vertex')]).write(sys.argv[2])
     assert_eq!(
         (f.positions, f.colors),
         (vec![1.0, 2.0, 3.0], vec![255, 128, 0])
+    );
+}
+
+#[test]
+fn non_finite_or_zero_rotation_splats_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let good = random_splats(20, 1, 11);
+    type Spoil = fn(&mut Splats);
+    let cases: [(&str, Spoil, &str); 7] = [
+        ("x", |s| s.means[3 * 17] = f32::NAN, "vertex 17: x is NaN"),
+        (
+            "z",
+            |s| s.means[3 * 2 + 2] = f32::INFINITY,
+            "vertex 2: z is inf",
+        ),
+        (
+            "opacity",
+            |s| s.opacities[5] = f32::NAN,
+            "vertex 5: opacity is NaN",
+        ),
+        (
+            "scale",
+            |s| s.log_scales[3 * 9 + 1] = f32::NEG_INFINITY,
+            "vertex 9: scale_1 is -inf",
+        ),
+        (
+            "rot",
+            |s| s.rotations[4 * 4 + 3] = f32::NAN,
+            "vertex 4: rot_3 is NaN",
+        ),
+        (
+            "rest",
+            |s| s.sh_rest[9 * 6 + 8] = f32::NAN,
+            "vertex 6: f_rest_8 is NaN",
+        ),
+        (
+            "zero",
+            |s| s.rotations[4 * 3..4 * 3 + 4].fill(0.0),
+            "vertex 3: rot_0..rot_3 are all zero",
+        ),
+    ];
+    for (name, spoil, expect) in cases {
+        let mut s = good.clone();
+        spoil(&mut s);
+        let p = d.join(format!("gaussians-{name}.ply"));
+        write_splats(&p, &s, None).unwrap();
+        let e = read_splats(&p).unwrap_err().to_string();
+        assert!(
+            e.contains(&format!("gaussians-{name}.ply")) && e.contains(expect),
+            "{name}: {e}"
+        );
+    }
+    // A quaternion that is zero in all but one component is a valid (unnormalised) rotation.
+    let mut s = good;
+    s.rotations[0..4].copy_from_slice(&[0.0, 0.0, -0.0, 1e-30]);
+    let p = d.join("ok.ply");
+    write_splats(&p, &s, None).unwrap();
+    assert_eq!(read_splats(&p).unwrap(), s);
+}
+
+#[test]
+fn point_clouds_refuse_only_non_finite_values() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // Positions far away, duplicates and black points are all fine for SfM points.
+    let cloud = PointCloud {
+        positions: vec![1e30, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0],
+        colors: vec![0; 9],
+    };
+    let p = d.join("points.ply");
+    write_points(&p, &cloud).unwrap();
+    assert_eq!(read_points(&p).unwrap(), cloud);
+    let mut nan = cloud;
+    nan.positions[4] = f32::NAN;
+    write_points(&p, &nan).unwrap();
+    let e = read_points(&p).unwrap_err().to_string();
+    assert!(
+        e.contains("points.ply") && e.contains("vertex 1: y is NaN"),
+        "{e}"
+    );
+    let float_colour = write_raw(
+        d,
+        "float.ply",
+        b"ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\nproperty float red\nproperty float green\nproperty float blue\nend_header\n0 0 0 1 1 1\n0 0 0 0.5 nan 0\n",
+    );
+    let e = read_points(&float_colour).unwrap_err().to_string();
+    assert!(e.contains("vertex 1: green is NaN"), "{e}");
+}
+
+/// A binary little-endian xyz PLY of `declared` vertices holding `actual` vertices' bytes.
+fn xyz_ply(declared: usize, actual: usize, before: &str) -> Vec<u8> {
+    let mut b = format!(
+        "ply\nformat binary_little_endian 1.0\n{before}element vertex {declared}\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
+    )
+    .into_bytes();
+    for i in 0..3 * actual {
+        b.extend_from_slice(&(i as f32).to_le_bytes());
+    }
+    b
+}
+
+#[test]
+fn bytes_after_the_declared_elements_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // The audit's file: 100 declared, 2189 present.
+    let p = write_raw(d, "short-count.ply", &xyz_ply(100, 2189, ""));
+    let e = read_points(&p).unwrap_err().to_string();
+    assert!(
+        e.contains("short-count.ply")
+            && e.contains(&format!(
+                "{} bytes after the 100 declared vertices",
+                2089 * 12
+            ))
+            && e.contains("exactly 2089 more vertices")
+            && e.contains("`element vertex` count is probably wrong"),
+        "{e}"
+    );
+    // Not a whole row left over: still refused.
+    let mut odd = xyz_ply(3, 3, "");
+    odd.push(b'\n');
+    let p = write_raw(d, "newline.ply", &odd);
+    let e = read_points(&p).unwrap_err().to_string();
+    assert!(e.contains("1 bytes after the 3 declared vertices"), "{e}");
+    // The same for splats.
+    let s = random_splats(10, 0, 5);
+    let good = d.join("good.ply");
+    write_splats(&good, &s, None).unwrap();
+    let bytes = std::fs::read(&good).unwrap();
+    let text = String::from_utf8_lossy(&bytes);
+    let header_end = text.find("end_header\n").unwrap() + 11;
+    let fewer = [
+        text[..header_end]
+            .replace("element vertex 10", "element vertex 7")
+            .as_bytes(),
+        &bytes[header_end..],
+    ]
+    .concat();
+    let p = write_raw(d, "gaussians.ply", &fewer);
+    let e = read_splats(&p).unwrap_err().to_string();
+    assert!(
+        e.contains("gaussians.ply") && e.contains("after the 7 declared vertices"),
+        "{e}"
+    );
+    // With a list element the size is only known after reading; checked at the end.
+    let mut listed = xyz_ply(
+        2,
+        2,
+        "element face 1\nproperty list uchar int vertex_indices\n",
+    );
+    let at = listed
+        .windows(11)
+        .position(|w| w == b"end_header\n")
+        .unwrap()
+        + 11;
+    let face: Vec<u8> = [&[3u8][..], &[0; 12]].concat();
+    listed.splice(at..at, face);
+    let p = write_raw(d, "mesh.ply", &listed);
+    assert_eq!(read_points(&p).unwrap().len(), 2);
+    listed.extend_from_slice(&[0; 5]);
+    let p = write_raw(d, "mesh-extra.ply", &listed);
+    let e = read_points(&p).unwrap_err().to_string();
+    assert!(
+        e.contains("mesh-extra.ply") && e.contains("5 bytes after the 2 declared vertices"),
+        "{e}"
+    );
+    // Ascii: trailing blank lines and spaces are fine, more data is not.
+    let head = "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\nend_header\n";
+    let p = write_raw(
+        d,
+        "a.ply",
+        format!("{head}1 2 3\n4 5 6\n\n  \r\n").as_bytes(),
+    );
+    assert_eq!(read_points(&p).unwrap().positions, [1., 2., 3., 4., 5., 6.]);
+    let p = write_raw(
+        d,
+        "a-more.ply",
+        format!("{head}1 2 3\n4 5 6\n7 8 9\n").as_bytes(),
+    );
+    let e = read_points(&p).unwrap_err().to_string();
+    assert!(
+        e.contains("a-more.ply") && e.contains("data after the 2 declared vertices"),
+        "{e}"
+    );
+}
+
+#[test]
+fn truncated_plys_name_the_element_and_sizes() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let p = write_raw(d, "cut.ply", &xyz_ply(2189, 100, ""));
+    let e = read_points(&p).unwrap_err().to_string();
+    assert!(
+        e.contains("cut.ply")
+            && e.contains("element vertex")
+            && e.contains("2189 declared vertices of 12 bytes need 26268 bytes")
+            && e.contains("only 1200 remain (room for 100 whole)"),
+        "{e}"
+    );
+    // An element before the vertex that runs out.
+    let p = write_raw(
+        d,
+        "cut-junk.ply",
+        &xyz_ply(1, 1, "element junk 100\nproperty uchar a\n"),
+    );
+    let e = read_points(&p).unwrap_err().to_string();
+    assert!(
+        e.contains("element junk") && e.contains("100 declared `junk` rows"),
+        "{e}"
+    );
+    // Elements after the vertex are skipped to find the end of the data, so a property-less
+    // one with a huge count must be refused before it becomes four billion loop turns.
+    let mut after = xyz_ply(1, 1, "");
+    let at = after
+        .windows(11)
+        .position(|w| w == b"end_header\n")
+        .unwrap();
+    after.splice(at..at, b"element junk 4000000000\n".iter().copied());
+    let p = write_raw(d, "junk-after.ply", &after);
+    let e = read_points(&p).unwrap_err().to_string();
+    assert!(
+        e.contains("element junk") && e.contains("cannot fit"),
+        "{e}"
+    );
+    // A list element makes the size unknown until read: running out is still said plainly.
+    let p = write_raw(
+        d,
+        "cut-list.ply",
+        &xyz_ply(
+            5,
+            2,
+            "element face 0\nproperty list uchar int vertex_indices\n",
+        ),
+    );
+    let e = read_points(&p).unwrap_err().to_string();
+    assert!(
+        e.contains("cut-list.ply")
+            && e.contains("element vertex")
+            && e.contains("ends before the 5 declared vertices are read"),
+        "{e}"
+    );
+    let p = write_raw(
+        d,
+        "cut.ascii.ply",
+        b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n1 2 3\n4 5 6\n",
+    );
+    let e = read_points(&p).unwrap_err().to_string();
+    assert!(
+        e.contains("cut.ascii.ply") && e.contains("ends before the 3 declared vertices"),
+        "{e}"
+    );
+}
+
+#[test]
+fn a_header_without_end_header_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let mut b = b"ply\nformat binary_little_endian 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\n".to_vec();
+    b.extend_from_slice(&[0xff, 0xfe, 0x80, 0x81, 0x00, 0x01].repeat(10));
+    let p = write_raw(d, "noend.ply", &b);
+    let e = read_points(&p).unwrap_err().to_string();
+    assert!(
+        e.contains("noend.ply") && e.contains("no `end_header` line in the whole file"),
+        "{e}"
+    );
+    // A header that has its end line but is otherwise bad keeps serde-ply's reason.
+    let p = write_raw(
+        d,
+        "bad.ply",
+        b"ply\nformat binary_little_endian 1.0\nelement vertex x\nend_header\n",
+    );
+    let e = read_points(&p).unwrap_err().to_string();
+    assert!(
+        e.contains("not a valid PLY header") && e.contains("count"),
+        "{e}"
     );
 }

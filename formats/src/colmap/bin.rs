@@ -3,6 +3,7 @@
 use std::io::Write;
 use std::path::Path;
 
+use super::check::Ids;
 use super::{Camera, CameraModel, Image, Model, Point2D, Point3D, TrackElement};
 use crate::atomic::{io_at, write_atomic};
 use crate::bytes::ByteReader;
@@ -28,9 +29,13 @@ pub(crate) fn parse_cameras(path: &Path, data: &[u8]) -> Result<Vec<Camera>> {
     let mut r = ByteReader::new(path, data);
     let n = r.count("num_cameras", 24)?;
     let mut out = Vec::with_capacity(n);
+    let mut ids = Ids::with_capacity(n);
     for i in 0..n {
         let f = |name: &'static str| move || format!("camera[{i}].{name}");
         let id = r.u32(&f("camera_id"))?;
+        if let Some(first) = ids.repeat(id, i) {
+            return Err(duplicate(path, f("camera_id")(), "camera", id, first));
+        }
         let model_id = r.i32(&f("model_id"))?;
         let model = CameraModel::from_id(model_id).ok_or_else(|| {
             FormatError::invalid(
@@ -68,6 +73,21 @@ pub(crate) fn parse_cameras(path: &Path, data: &[u8]) -> Result<Vec<Camera>> {
     Ok(out)
 }
 
+/// A record whose id an earlier record (`kind[first]`) already has.
+fn duplicate(
+    path: &Path,
+    field: String,
+    kind: &str,
+    id: impl std::fmt::Display,
+    first: usize,
+) -> FormatError {
+    FormatError::invalid(
+        path,
+        field,
+        format!("duplicate {kind} id {id}: {kind}[{first}] has it too; ids must be unique"),
+    )
+}
+
 pub(crate) fn read_images(path: &Path) -> Result<Vec<Image>> {
     let data = read_file(path)?;
     parse_images(path, &data)
@@ -77,9 +97,13 @@ pub(crate) fn parse_images(path: &Path, data: &[u8]) -> Result<Vec<Image>> {
     let mut r = ByteReader::new(path, data);
     let n = r.count("num_reg_images", 4 + 56 + 4 + 1 + 8)?;
     let mut out = Vec::with_capacity(n);
+    let mut ids = Ids::with_capacity(n);
     for i in 0..n {
         let f = |name: &'static str| move || format!("image[{i}].{name}");
         let id = r.u32(&f("image_id"))?;
+        if let Some(first) = ids.repeat(id, i) {
+            return Err(duplicate(path, f("image_id")(), "image", id, first));
+        }
         let mut qvec = [0.0; 4];
         for q in &mut qvec {
             *q = r.f64(&f("qvec"))?;
@@ -127,9 +151,13 @@ pub(crate) fn parse_points(path: &Path, data: &[u8]) -> Result<Vec<Point3D>> {
     let mut r = ByteReader::new(path, data);
     let n = r.count("num_points", 8 + 24 + 3 + 8 + 8)?;
     let mut out = Vec::with_capacity(n);
+    let mut ids = Ids::with_capacity(n);
     for i in 0..n {
         let f = |name: &'static str| move || format!("point3D[{i}].{name}");
         let id = r.u64(&f("point3D_id"))?;
+        if let Some(first) = ids.repeat(id, i) {
+            return Err(duplicate(path, f("point3D_id")(), "point3D", id, first));
+        }
         let mut xyz = [0.0; 3];
         for v in &mut xyz {
             *v = r.f64(&f("xyz"))?;

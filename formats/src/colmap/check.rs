@@ -2,6 +2,10 @@
 //! camera read silently would surface much later as a blank render or a panic far from the file,
 //! so each record is checked as it is read. `err(field, message)` names the file and the record.
 
+use std::collections::HashMap;
+use std::collections::hash_map::Entry;
+use std::hash::Hash;
+
 use super::{Camera, Image, Point3D};
 use crate::error::{FormatError, Result};
 
@@ -69,4 +73,26 @@ pub(crate) fn image(img: &Image, err: impl Fn(&str, String) -> FormatError) -> R
 
 pub(crate) fn point(p: &Point3D, err: impl Fn(&str, String) -> FormatError) -> Result<()> {
     finite(&p.xyz, "xyz", &err)
+}
+
+/// Ids seen so far in one file, each with where it was first seen (a record index or a line).
+/// COLMAP keys every record by its id, so a second record with the same id is either dropped or
+/// overwrites the first depending on the reader; we refuse the file instead.
+pub(crate) struct Ids<K>(HashMap<K, usize>);
+
+impl<K: Hash + Eq> Ids<K> {
+    pub(crate) fn with_capacity(n: usize) -> Self {
+        Self(HashMap::with_capacity(n))
+    }
+
+    /// Records `id` as seen at `at`, or returns where it was seen first.
+    pub(crate) fn repeat(&mut self, id: K, at: usize) -> Option<usize> {
+        match self.0.entry(id) {
+            Entry::Occupied(first) => Some(*first.get()),
+            Entry::Vacant(slot) => {
+                slot.insert(at);
+                None
+            }
+        }
+    }
 }

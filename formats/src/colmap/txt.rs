@@ -5,6 +5,7 @@ use std::io::Write as _;
 use std::path::Path;
 use std::str::FromStr;
 
+use super::check::Ids;
 use super::{Camera, CameraModel, Image, Model, Point2D, Point3D, TrackElement};
 use crate::atomic::{io_at, write_atomic};
 use crate::error::{FormatError, Result, read_text};
@@ -37,10 +38,26 @@ impl<'a> Line<'a> {
     fn err(&self, field: &str, message: impl Into<String>) -> FormatError {
         FormatError::invalid(self.path, format!("line {}: {field}", self.number), message)
     }
+
+    /// The error for an id an earlier line already has.
+    fn duplicate(
+        &self,
+        field: &str,
+        kind: &str,
+        id: impl std::fmt::Display,
+        first: usize,
+    ) -> FormatError {
+        self.err(
+            field,
+            format!("duplicate {kind} id {id}: line {first} has it too; ids must be unique"),
+        )
+    }
 }
 
 /// Non-comment lines with 1-based numbers; blank lines are kept because `images.txt` uses them.
+/// A leading UTF-8 byte order mark (Windows editors add one) is not part of the first line.
 fn data_lines<'a>(path: &'a Path, text: &'a str) -> impl Iterator<Item = Line<'a>> {
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     text.lines()
         .enumerate()
         .filter(|(_, l)| !l.trim_start().starts_with('#'))
@@ -73,6 +90,7 @@ pub fn read_txt(dir: &Path) -> Result<Model> {
 
 pub(crate) fn parse_cameras(path: &Path, text: &str) -> Result<Vec<Camera>> {
     let mut out = Vec::new();
+    let mut ids = Ids::with_capacity(0);
     for line in data_lines(path, text).filter(|l| !l.tokens.is_empty()) {
         let name = line.tokens.get(1).copied().unwrap_or("");
         let model = CameraModel::from_name(name).ok_or_else(|| {
@@ -83,22 +101,31 @@ pub(crate) fn parse_cameras(path: &Path, text: &str) -> Result<Vec<Camera>> {
                 ),
             )
         })?;
-        if line.tokens.len() != 4 + model.num_params() {
+        let want = 4 + model.num_params();
+        if line.tokens.len() != want {
+            let hint = if line.tokens.len() < want {
+                "is WIDTH, HEIGHT or a parameter missing?"
+            } else {
+                "too many fields"
+            };
             return Err(line.err(
                 "PARAMS",
                 format!(
-                    "{} needs {} parameters, got {}",
-                    name,
+                    "{name} needs {} parameters after CAMERA_ID MODEL WIDTH HEIGHT, {want} fields in all; the line has {} ({hint})",
                     model.num_params(),
-                    line.tokens.len().saturating_sub(4)
+                    line.tokens.len(),
                 ),
             ));
         }
         let params = (0..model.num_params())
             .map(|k| line.get(4 + k, &format!("PARAMS[{k}]")))
             .collect::<Result<_>>()?;
+        let id = line.get(0, "CAMERA_ID")?;
+        if let Some(first) = ids.repeat(id, line.number) {
+            return Err(line.duplicate("CAMERA_ID", "camera", id, first));
+        }
         let cam = Camera {
-            id: line.get(0, "CAMERA_ID")?,
+            id,
             model,
             width: line.get(2, "WIDTH")?,
             height: line.get(3, "HEIGHT")?,
@@ -114,6 +141,7 @@ pub(crate) fn parse_cameras(path: &Path, text: &str) -> Result<Vec<Camera>> {
 
 pub(crate) fn parse_images(path: &Path, text: &str) -> Result<Vec<Image>> {
     let mut out = Vec::new();
+    let mut ids = Ids::with_capacity(0);
     let mut lines = data_lines(path, text);
     while let Some(head) = lines.next() {
         if head.tokens.is_empty() {
@@ -165,8 +193,12 @@ pub(crate) fn parse_images(path: &Path, text: &str) -> Result<Vec<Image>> {
                 });
             }
         }
+        let id = head.get(0, "IMAGE_ID")?;
+        if let Some(first) = ids.repeat(id, head.number) {
+            return Err(head.duplicate("IMAGE_ID", "image", id, first));
+        }
         let img = Image {
-            id: head.get(0, "IMAGE_ID")?,
+            id,
             qvec,
             tvec,
             camera_id: head.get(8, "CAMERA_ID")?,
@@ -183,6 +215,7 @@ pub(crate) fn parse_images(path: &Path, text: &str) -> Result<Vec<Image>> {
 
 pub(crate) fn parse_points(path: &Path, text: &str) -> Result<Vec<Point3D>> {
     let mut out = Vec::new();
+    let mut ids = Ids::with_capacity(0);
     for line in data_lines(path, text).filter(|l| !l.tokens.is_empty()) {
         if line.tokens.len() < 8 || (line.tokens.len() - 8) % 2 != 0 {
             return Err(line.err(
@@ -201,8 +234,12 @@ pub(crate) fn parse_points(path: &Path, text: &str) -> Result<Vec<Point3D>> {
                 })
             })
             .collect::<Result<_>>()?;
+        let id = line.get(0, "POINT3D_ID")?;
+        if let Some(first) = ids.repeat(id, line.number) {
+            return Err(line.duplicate("POINT3D_ID", "point3D", id, first));
+        }
         let point = Point3D {
-            id: line.get(0, "POINT3D_ID")?,
+            id,
             xyz: [line.get(1, "X")?, line.get(2, "Y")?, line.get(3, "Z")?],
             rgb: [line.get(4, "R")?, line.get(5, "G")?, line.get(6, "B")?],
             error: line.get(7, "ERROR")?,

@@ -5,8 +5,8 @@ use std::path::Path;
 
 use serde_ply::{PropertyType, ScalarType};
 
+use super::open_at_vertex;
 use super::rows::read_vertex;
-use super::{body_error, open_at_vertex};
 use crate::atomic::{io_at, write_atomic};
 use crate::error::{FormatError, Result};
 
@@ -32,7 +32,8 @@ static FIELDS: [&str; 6] = ["x", "y", "z", "red", "green", "blue"];
 /// Reads a point cloud PLY. Integer colours are taken as 0–255; float colours as 0–1. Points
 /// without colour properties come back mid-grey.
 pub fn read_points(path: &Path) -> Result<PointCloud> {
-    let (mut reader, vertex) = open_at_vertex(path)?;
+    let mut opened = open_at_vertex(path)?;
+    let vertex = &opened.vertex;
     for f in &FIELDS[..3] {
         if !vertex.has_property(f) {
             return Err(FormatError::invalid(
@@ -50,7 +51,13 @@ pub fn read_points(path: &Path) -> Result<PointCloud> {
         positions: Vec::with_capacity(3 * vertex.count),
         colors: Vec::with_capacity(3 * vertex.count),
     };
-    read_vertex(&mut reader, &FIELDS, |row| {
+    // Only values that cannot be used are refused: a NaN position or float colour.
+    let mut bad: Option<(usize, String)> = None;
+    let result = read_vertex(&mut opened.reader, &FIELDS, |row| {
+        if let Some(j) = (0..6).find(|&j| row.seen & (1 << j) != 0 && !row.vals[j].is_finite()) {
+            bad = Some((cloud.len(), format!("{} is {}", FIELDS[j], row.vals[j])));
+            return Err(String::new());
+        }
         cloud.positions.extend_from_slice(&row.vals[..3]);
         for c in 3..6 {
             let v = if row.seen & (1 << c) != 0 {
@@ -61,8 +68,12 @@ pub fn read_points(path: &Path) -> Result<PointCloud> {
             cloud.colors.push(v as u8);
         }
         Ok(())
-    })
-    .map_err(|e| body_error(path, e))?;
+    });
+    if let Some((i, message)) = bad {
+        return Err(FormatError::invalid(path, format!("vertex {i}"), message));
+    }
+    result.map_err(|e| opened.body_error(e))?;
+    opened.finish()?;
     Ok(cloud)
 }
 

@@ -4,8 +4,8 @@ use std::io::Write;
 use std::path::Path;
 use std::sync::LazyLock;
 
+use super::open_at_vertex;
 use super::rows::{MAX_FIELDS, read_vertex};
-use super::{body_error, open_at_vertex};
 use crate::atomic::{io_at, write_atomic};
 use crate::error::{FormatError, Result};
 use crate::splats::{Splats, sh_rest_per_channel};
@@ -32,9 +32,11 @@ static FIELDS: LazyLock<[Vec<&'static str>; 4]> = LazyLock::new(|| {
 
 /// Reads a 3DGS PLY. Properties are found by name (any order, float or double or integer, ascii
 /// or either binary byte order); unknown properties and other elements are skipped. The SH degree
-/// comes from the count of `f_rest_*` properties, which must be 0, 9, 24 or 45.
+/// comes from the count of `f_rest_*` properties, which must be 0, 9, 24 or 45. A NaN or
+/// infinite value or an all-zero rotation is refused, naming the vertex.
 pub fn read_splats(path: &Path) -> Result<Splats> {
-    let (mut reader, vertex) = open_at_vertex(path)?;
+    let mut opened = open_at_vertex(path)?;
+    let vertex = &opened.vertex;
     let n_rest = vertex
         .properties
         .iter()
@@ -69,18 +71,37 @@ pub fn read_splats(path: &Path) -> Result<Splats> {
     debug_assert!(fields.len() <= MAX_FIELDS);
     let k3 = 3 * sh_rest_per_channel(degree);
     let mut s = Splats::with_capacity(vertex.count, degree);
-    read_vertex(&mut reader, fields, |row| {
-        let v = &row.vals;
+    let o = 6 + k3;
+    // A NaN or infinite parameter, or a zero quaternion, renders as nothing or as garbage far
+    // from this file; refuse it here, naming the vertex, in the same pass that copies the row.
+    let mut bad: Option<(usize, String)> = None;
+    let result = read_vertex(&mut opened.reader, fields, |row| {
+        let v = &row.vals[..fields.len()];
+        if !v.iter().all(|x| x.is_finite()) {
+            let j = v.iter().position(|x| !x.is_finite()).unwrap_or(0);
+            bad = Some((s.len(), format!("{} is {}", fields[j], v[j])));
+            return Err(String::new());
+        }
+        if v[o + 4..o + 8].iter().all(|&q| q == 0.0) {
+            bad = Some((
+                s.len(),
+                "rot_0..rot_3 are all zero, expected a rotation quaternion".to_owned(),
+            ));
+            return Err(String::new());
+        }
         s.means.extend_from_slice(&v[0..3]);
         s.sh_dc.extend_from_slice(&v[3..6]);
         s.sh_rest.extend_from_slice(&v[6..6 + k3]);
-        let o = 6 + k3;
         s.opacities.push(v[o]);
         s.log_scales.extend_from_slice(&v[o + 1..o + 4]);
         s.rotations.extend_from_slice(&v[o + 4..o + 8]);
         Ok(())
-    })
-    .map_err(|e| body_error(path, e))?;
+    });
+    if let Some((i, message)) = bad {
+        return Err(FormatError::invalid(path, format!("vertex {i}"), message));
+    }
+    result.map_err(|e| opened.body_error(e))?;
+    opened.finish()?;
     Ok(s)
 }
 

@@ -76,6 +76,31 @@ fn nerf_scene(paths: &[&str]) -> tempfile::TempDir {
     tmp
 }
 
+/// A COLMAP model of one 8×6 pinhole camera posing `images` (id, name) along z.
+fn model_of(images: &[(u32, &str)]) -> Model {
+    Model {
+        cameras: vec![Camera {
+            id: 1,
+            model: CameraModel::Pinhole,
+            width: 8,
+            height: 6,
+            params: vec![10.0, 10.0, 4.0, 3.0],
+        }],
+        images: images
+            .iter()
+            .map(|&(id, name)| Image {
+                id,
+                qvec: [1.0, 0.0, 0.0, 0.0],
+                tvec: [0.0, 0.0, 4.0 + f64::from(id)],
+                camera_id: 1,
+                name: name.into(),
+                points2d: vec![],
+            })
+            .collect(),
+        points: vec![],
+    }
+}
+
 #[test]
 fn nerf_paths_outside_the_dataset_are_refused_unless_allowed() {
     let tmp = nerf_scene(&["images/a.png", "../elsewhere/b.png"]);
@@ -130,26 +155,7 @@ fn colmap_image_names_outside_the_dataset_are_refused() {
     let scene = tmp.path().join("scene");
     png(&scene.join("images/a.png"));
     png(&tmp.path().join("x.png"));
-    let model = Model {
-        cameras: vec![Camera {
-            id: 1,
-            model: CameraModel::Pinhole,
-            width: 8,
-            height: 6,
-            params: vec![10.0, 10.0, 4.0, 3.0],
-        }],
-        images: [(1, "a.png"), (2, "../../x.png")]
-            .map(|(id, name)| Image {
-                id,
-                qvec: [1.0, 0.0, 0.0, 0.0],
-                tvec: [0.0, 0.0, 4.0 + f64::from(id)],
-                camera_id: 1,
-                name: name.into(),
-                points2d: vec![],
-            })
-            .to_vec(),
-        points: vec![],
-    };
+    let model = model_of(&[(1, "a.png"), (2, "../../x.png")]);
     std::fs::create_dir_all(scene.join("sparse/0")).unwrap();
     colmap::write_bin(&model, &scene.join("sparse/0")).unwrap();
     let e = err("ingest-colmap", &scene, json!({}));
@@ -213,26 +219,7 @@ fn photos_the_model_does_not_pose_are_named_with_the_test_views_they_shift() {
         png(&scene.join("images").join(n));
     }
     // b.png is on disk but not in the model: the hold rule counts a, c, d, e.
-    let model = Model {
-        cameras: vec![Camera {
-            id: 1,
-            model: CameraModel::Pinhole,
-            width: 8,
-            height: 6,
-            params: vec![10.0, 10.0, 4.0, 3.0],
-        }],
-        images: [(1, "a.png"), (3, "c.png"), (4, "d.png"), (5, "e.png")]
-            .map(|(id, name)| Image {
-                id,
-                qvec: [1.0, 0.0, 0.0, 0.0],
-                tvec: [0.0, 0.0, 4.0 + f64::from(id)],
-                camera_id: 1,
-                name: name.into(),
-                points2d: vec![],
-            })
-            .to_vec(),
-        points: vec![],
-    };
+    let model = model_of(&[(1, "a.png"), (3, "c.png"), (4, "d.png"), (5, "e.png")]);
     std::fs::create_dir_all(scene.join("sparse/0")).unwrap();
     colmap::write_bin(&model, &scene.join("sparse/0")).unwrap();
     let warned = |options: Value| {
