@@ -31,7 +31,12 @@ pub fn list_images(dir: &Path) -> Result<Vec<PathBuf>> {
 /// Width and height from the file header, without decoding pixels.
 pub fn image_size(path: &Path) -> Result<(u32, u32)> {
     if !path.is_file() {
-        return Err(FormatError::invalid(path, "image", "file does not exist"));
+        let why = if path.is_dir() {
+            "is a folder, expected an image file"
+        } else {
+            "file does not exist"
+        };
+        return Err(FormatError::invalid(path, "image", why));
     }
     image::image_dimensions(path)
         .map_err(|e| FormatError::invalid(path, "image", format!("cannot read image header: {e}")))

@@ -294,12 +294,27 @@ fn matrix(v: Option<&Value>, at: &Place) -> Result<Mat4> {
     Ok(m)
 }
 
+/// Whether serde_json stopped (1-based `line`, `column`: the character it could not read) at
+/// Python's spelling of a non-finite float.
+fn non_finite_at(text: &str, line: usize, column: usize) -> bool {
+    let Some(l) = text.lines().nth(line.saturating_sub(1)) else {
+        return false;
+    };
+    let at = l.get(column.saturating_sub(1)..).unwrap_or("");
+    ["NaN", "Infinity", "-Infinity"]
+        .iter()
+        .any(|w| at.starts_with(w))
+}
+
 /// Reads one transforms file; `split` labels frames that carry no `split` key of their own.
 pub fn read_transforms(path: &Path, split: Option<&str>) -> Result<Vec<NerfFrame>> {
     let text = read_text(path)?;
     let root: Value = serde_json::from_str(&text).map_err(|e| {
         let hint = if e.to_string().contains("out of range") {
             " (a number beyond the range of a 64-bit float)"
+        } else if non_finite_at(&text, e.line(), e.column()) {
+            " (NaN or Infinity, which JSON has no numbers for: Python's json.dump writes them \
+             unless given allow_nan=False; a pose or intrinsic there is not a number)"
         } else {
             ""
         };

@@ -122,3 +122,16 @@ fn prescaled_folder_is_found_and_bench_images_listed() {
         assert!(rgb.data.iter().all(|v| (0.0..=1.0).contains(v)));
     }
 }
+
+#[test]
+fn a_folder_where_a_photo_should_be_is_named_as_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let e = cocog_formats::images::image_size(dir.path())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("is a folder"), "{e}");
+    let e = cocog_formats::images::image_size(&dir.path().join("none.png"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("does not exist"), "{e}");
+}

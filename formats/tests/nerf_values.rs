@@ -157,3 +157,17 @@ fn transform_matrix_last_row_is_shown_plainly() {
         &["frames[1].transform_matrix", "row 3", "[0, 0, 0, 2]"],
     );
 }
+
+#[test]
+fn pythons_nan_and_infinity_are_named() {
+    let text = doc().to_string();
+    for word in ["NaN", "Infinity", "-Infinity"] {
+        let bad = text.replacen("4.0", word, 1);
+        assert!(bad.contains(word));
+        let err = read_err(&bad);
+        assert_clear(&err, &["NaN or Infinity", "allow_nan=False", "line 1"]);
+    }
+    // Other syntax errors keep serde_json's own words.
+    let err = read_err(&text.replacen("4.0", "fourish", 1));
+    assert!(!err.contains("NaN"), "{err}");
+}
