@@ -139,7 +139,9 @@ impl LensModel {
             path: path.to_path_buf(),
             why,
         };
-        let st = SafeTensors::deserialize(&data).map_err(|e| fail(e.to_string()))?;
+        let st = SafeTensors::deserialize(&data).map_err(|e| {
+            fail(crate::safetensors_layout::explain_layout(&data).unwrap_or_else(|| e.to_string()))
+        })?;
         let (_, header) = SafeTensors::read_metadata(&data).map_err(|e| fail(e.to_string()))?;
         let meta = header.metadata().clone().unwrap_or_default();
         let text = |key: &str| {

@@ -15,6 +15,7 @@ mod npy_header;
 pub mod ply;
 pub mod pose;
 pub mod rng;
+pub mod safetensors_layout;
 pub mod splats;
 pub mod spz;
 

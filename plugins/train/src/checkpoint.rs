@@ -254,7 +254,12 @@ impl<'a> Reader<'a> {
             path: path.to_path_buf(),
             why,
         };
-        let st = SafeTensors::deserialize(data).map_err(|e| fail(e.to_string()))?;
+        let st = SafeTensors::deserialize(data).map_err(|e| {
+            fail(
+                cocog_formats::safetensors_layout::explain_layout(data)
+                    .unwrap_or_else(|| e.to_string()),
+            )
+        })?;
         let (_, header) = SafeTensors::read_metadata(data).map_err(|e| fail(e.to_string()))?;
         let meta = header.metadata().clone().unwrap_or_default();
         let r = Self { path, st, meta };
@@ -560,6 +565,12 @@ mod tests {
         std::fs::write(&file, b"not safetensors").unwrap();
         let bad = TrainState::load(&file).unwrap_err().to_string();
         assert!(bad.contains("not a cocog checkpoint"), "{bad}");
+        // An interrupted copy: the safetensors crate alone says "incomplete metadata".
+        let whole = state().save(dir.path()).unwrap();
+        let data = std::fs::read(&whole).unwrap();
+        std::fs::write(&whole, &data[..data.len() - 10]).unwrap();
+        let cut = TrainState::load(&whole).unwrap_err().to_string();
+        assert!(cut.contains("truncated"), "{cut}");
         // A valid file whose SH tensor disagrees with the Gaussian count.
         let mut s = state();
         s.params.sh.pop();
