@@ -180,6 +180,21 @@ fn cargo_deps_copies_count_once_and_missing_dirs_are_named() {
     // `deps/` on its own still finds it.
     let out = cocog(&["plugins", "--plugin-path", deps.to_str().expect("utf-8")]);
     assert!(cocog_tests::stdout(&out).contains("explode"));
+    // Cargo hard-links the two: one file, met first in `deps/`, still listed once.
+    let name = plugin.file_name().expect("name");
+    std::fs::remove_file(deps.join(name)).expect("rm");
+    std::fs::hard_link(dir.path().join(name), deps.join(name)).expect("hard link");
+    let out = cocog(&[
+        "plugins",
+        "--plugin-path",
+        dir.path().to_str().expect("utf-8"),
+    ]);
+    let table = cocog_tests::stdout(&out);
+    assert_eq!(
+        table.lines().filter(|l| l.starts_with("explode ")).count(),
+        1,
+        "{table}"
+    );
 
     let missing = dir.path().join("no-such-dir");
     let out = cocog(&["plugins", "--plugin-path", missing.to_str().expect("utf-8")]);

@@ -61,12 +61,14 @@ pub fn discover(dirs: &[PathBuf]) -> Discovery {
             if !entry.file_type().is_file() || !is_library(path) {
                 continue;
             }
-            if !seen.insert(identity(path)) {
-                continue;
-            }
+            // Before the identity check: cargo hard-links the two copies, and the walk meets
+            // `deps/` first, so the upper one would be the duplicate dropped unseen.
             if is_cargo_deps_copy(path, dir) {
                 let why = "cargo's copy of the library one folder up".to_owned();
                 found.skipped.push((path.to_path_buf(), why));
+                continue;
+            }
+            if !seen.insert(identity(path)) {
                 continue;
             }
             match LoadedPlugin::load(path) {
