@@ -100,11 +100,21 @@ fn exit_code(e: &anyhow::Error) -> u8 {
             if let RunError::Registry(RegistryError::Unknown { .. }) = r {
                 return exit::UNAVAILABLE;
             }
+            if let RunError::Pipeline { .. } = r {
+                return exit::USAGE;
+            }
         }
         if let Some(RegistryError::Unknown { .. }) = cause.downcast_ref::<RegistryError>() {
             return exit::UNAVAILABLE;
         }
         if cause.downcast_ref::<commands::UsageError>().is_some() {
+            return exit::USAGE;
+        }
+        // A value the stage refuses (`--downscale 0`, an unknown `--background`) is as much a
+        // usage error as one clap refuses, whichever side of the stage boundary checks it.
+        if let Some(cocog_pipeline::StageError::Options(_)) =
+            cause.downcast_ref::<cocog_pipeline::StageError>()
+        {
             return exit::USAGE;
         }
     }

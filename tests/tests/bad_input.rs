@@ -20,8 +20,13 @@ fn recenter(input: &Path, output: &Path, extra: &[&str]) -> std::process::Output
 }
 
 fn assert_one_line_error(out: &std::process::Output, needles: &[&str]) {
+    assert_error_exit(out, 1, needles);
+}
+
+/// One `error:` line holding every needle, and exit status `code`.
+fn assert_error_exit(out: &std::process::Output, code: i32, needles: &[&str]) {
     let err = stderr(out);
-    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert_eq!(out.status.code(), Some(code), "{err}");
     let errors: Vec<&str> = err.lines().filter(|l| l.starts_with("error:")).collect();
     assert_eq!(errors.len(), 1, "{err}");
     for n in needles {
@@ -136,9 +141,22 @@ fn bad_option_values_are_named() {
     let input = work.path().join("scene");
     write_tiny_scene(&input, 4, [0.0; 3], 1.0);
     let out = recenter(&input, &work.path().join("o"), &["--set", "radius=\"big\""]);
-    assert_one_line_error(&out, &["option 'radius'", "expected float"]);
+    // A bad value or an unknown option is a usage error, as clap's own are.
+    assert_error_exit(&out, 2, &["option 'radius'", "expected float"]);
     let out = recenter(&input, &work.path().join("o"), &["--set", "raduis=2"]);
-    assert_one_line_error(&out, &["no option 'raduis'", "radius"]);
+    assert_error_exit(&out, 2, &["no option 'raduis'", "radius"]);
+    // One the stage itself refuses, past the option table's checks.
+    let s = input.to_str().expect("utf-8");
+    let o = work.path().join("t");
+    let out = cocog(&[
+        "train",
+        s,
+        "-o",
+        o.to_str().expect("utf-8"),
+        "--background",
+        "purple",
+    ]);
+    assert_error_exit(&out, 2, &["option 'background'", "purple"]);
     assert_eq!(listing(work.path()), vec!["scene"]);
 }
 

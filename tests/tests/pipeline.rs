@@ -94,7 +94,7 @@ fn pipeline_mistakes_fail_before_any_stage_runs() {
     )
     .expect("write");
     let out = cocog(&["run", path_str(&pipeline)]);
-    assert_eq!(out.status.code(), Some(1));
+    assert_eq!(out.status.code(), Some(2));
     assert!(
         stderr(&out).contains("p.toml") && stderr(&out).contains("[densfy]"),
         "{}",
@@ -107,7 +107,7 @@ fn pipeline_mistakes_fail_before_any_stage_runs() {
     )
     .expect("write");
     let out = cocog(&["run", path_str(&pipeline)]);
-    assert_eq!(out.status.code(), Some(1));
+    assert_eq!(out.status.code(), Some(2));
     assert!(
         stderr(&out).contains("'render'") && stderr(&out).contains("does not write a scene"),
         "{}",
@@ -121,7 +121,7 @@ fn pipeline_mistakes_fail_before_any_stage_runs() {
     )
     .expect("write");
     let out = cocog(&["run", path_str(&pipeline)]);
-    assert_eq!(out.status.code(), Some(1));
+    assert_eq!(out.status.code(), Some(2));
     assert!(
         stderr(&out).contains("no option 'formt'"),
         "{}",
@@ -133,7 +133,7 @@ fn pipeline_mistakes_fail_before_any_stage_runs() {
     )
     .expect("write");
     let out = cocog(&["run", path_str(&pipeline)]);
-    assert_eq!(out.status.code(), Some(1));
+    assert_eq!(out.status.code(), Some(2));
     assert!(
         stderr(&out).contains("[densify] option 'max-distance': NaN is not a finite number"),
         "{}",
@@ -142,7 +142,7 @@ fn pipeline_mistakes_fail_before_any_stage_runs() {
 
     std::fs::write(&pipeline, "[pipeline]\ninput = 3\n").expect("write");
     let out = cocog(&["run", path_str(&pipeline)]);
-    assert_eq!(out.status.code(), Some(1));
+    assert_eq!(out.status.code(), Some(2));
     assert!(stderr(&out).contains("p.toml"), "{}", stderr(&out));
     assert_eq!(listing(work.path()), vec!["dataset", "p.toml"]);
 }
