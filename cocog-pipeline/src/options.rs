@@ -81,6 +81,10 @@ pub struct OptionSpec {
     /// Largest accepted value of a number (inclusive).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max: Option<f64>,
+    /// The texts a string option takes; empty: any. A plugin built before the field sends
+    /// none, which reads as any.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub choices: Vec<String>,
 }
 
 impl OptionSpec {
@@ -92,7 +96,29 @@ impl OptionSpec {
             help: help.to_owned(),
             min: None,
             max: None,
+            choices: Vec::new(),
         }
+    }
+
+    /// A text other than `choices` is refused before any stage of a run starts (a pipeline's
+    /// last stage included), not when its stage reads it.
+    pub fn one_of(mut self, choices: &[&str]) -> Self {
+        self.choices = choices.iter().map(|c| (*c).to_owned()).collect();
+        self
+    }
+
+    /// Why `v` is not one of `choices`, if it is not.
+    fn not_a_choice(&self, v: &Value) -> Option<String> {
+        let text = v.as_str()?;
+        let (last, rest) = self.choices.split_last()?;
+        (!self.choices.iter().any(|c| c == text)).then(|| {
+            let listed = if rest.is_empty() {
+                last.clone()
+            } else {
+                format!("{} or {last}", rest.join(", "))
+            };
+            format!("expected {listed}")
+        })
     }
 
     /// Numbers below `min` are refused before the stage runs.
@@ -183,7 +209,7 @@ impl Options {
                     out.insert(spec.name.clone(), Value::String(v.to_string()));
                 }
                 Some(v) if spec.kind.accepts(v) => {
-                    if let Some(why) = spec.out_of_range(v) {
+                    if let Some(why) = spec.out_of_range(v).or_else(|| spec.not_a_choice(v)) {
                         return Err(StageError::Options(format!(
                             "stage '{stage}' option '{}': {why}, got {v}",
                             spec.name
@@ -297,6 +323,23 @@ mod tests {
         // Defaults are the stage's own and are not re-checked.
         let wide = vec![OptionSpec::int("n", 0, "").at_least(1.0)];
         assert!(Options::validate("s", &wide, &map(json!({}))).is_ok());
+    }
+
+    #[test]
+    fn texts_outside_their_choices_are_refused() {
+        let s = vec![OptionSpec::string("format", "ply", "").one_of(&["ply", "glb", "spz"])];
+        assert!(Options::validate("s", &s, &map(json!({"format": "glb"}))).is_ok());
+        let e = Options::validate("s", &s, &map(json!({"format": "obj"}))).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("'format': expected ply, glb or spz, got \"obj\""),
+            "{e}"
+        );
+        // A plugin's table from before the field reads as any text.
+        let old: OptionSpec =
+            serde_json::from_value(json!({"name": "f", "kind": "string", "default": "x"}))
+                .expect("spec");
+        assert!(Options::validate("s", &[old], &map(json!({"f": "anything"}))).is_ok());
     }
 
     #[test]

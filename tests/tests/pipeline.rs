@@ -140,6 +140,20 @@ fn pipeline_mistakes_fail_before_any_stage_runs() {
         stderr(&out)
     );
 
+    // A value the last stage refuses stops the run before the first stage, not after it.
+    std::fs::write(
+        &pipeline,
+        "[pipeline]\ninput = \"dataset\"\noutput = \"out\"\nstages = [\"ingest-colmap\", \"densify\", \"export\"]\n[export]\nformat = \"obj\"\n",
+    )
+    .expect("write");
+    let out = cocog(&["run", path_str(&pipeline)]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        stderr(&out).contains("'format': expected ply, glb or spz, got \"obj\""),
+        "{}",
+        stderr(&out)
+    );
+
     std::fs::write(&pipeline, "[pipeline]\ninput = 3\n").expect("write");
     let out = cocog(&["run", path_str(&pipeline)]);
     assert_eq!(out.status.code(), Some(2));

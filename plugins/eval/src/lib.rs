@@ -70,7 +70,8 @@ pub fn metric_options() -> Vec<OptionSpec> {
             "auto",
             "auto: LPIPS when its weights are installed (scripts/lpips/fetch-weights.sh); \
              require: fail without them; off: skip LPIPS",
-        ),
+        )
+        .one_of(&["auto", "require", "off"]),
         OptionSpec::bool("vgg", false, "also report LPIPS-VGG (about 25x slower)"),
         OptionSpec::optional(
             "lpips_weights",

@@ -29,7 +29,7 @@ impl Stage for Export {
             kind: StageKind::Export,
             output: OutputKind::File,
             description: "Write the scene's Gaussians as an INRIA 3DGS .ply, a glTF KHR_gaussian_splatting .glb or a Niantic .spz".to_owned(),
-            options: vec![OptionSpec::string("format", "ply", "ply | glb | spz")],
+            options: vec![OptionSpec::string("format", "ply", "ply | glb | spz").one_of(&["ply", "glb", "spz"])],
         }
     }
 

@@ -38,6 +38,7 @@ pub(crate) struct RenderJob {
 
 pub(crate) fn split_option() -> OptionSpec {
     OptionSpec::string("split", "test", "which views: test, train or all")
+        .one_of(&["test", "train", "all"])
 }
 
 pub(crate) fn downscale_option() -> OptionSpec {
@@ -46,6 +47,7 @@ pub(crate) fn downscale_option() -> OptionSpec {
         1,
         "render at the views' size divided by N (match the training --downscale)",
     )
+    .between(1.0, 64.0)
 }
 
 pub(crate) fn downscale(req: &StageRequest, stage: &str) -> Result<u32, StageError> {

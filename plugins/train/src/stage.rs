@@ -35,7 +35,8 @@ fn options() -> Vec<OptionSpec> {
             "cocog (CoCoGaussian: learns the defocus of each photo, keeps sharp base Gaussians; \
              the default) or 3dgs (vanilla INRIA, about 2.8× cheaper a step); a resumed run \
              keeps its checkpoint's",
-        ),
+        )
+        .one_of(&["cocog", "3dgs"]),
         OptionSpec::optional(
             "coc_variant",
             OptionKind::String,
@@ -47,19 +48,22 @@ fn options() -> Vec<OptionSpec> {
              on dev-table its first 100 blurred steps cost the base 2 dB); a resumed run keeps \
              its checkpoint's. Runs shorter than 7000 iterations start h_θ and F at the same \
              shares of the run unless either start is given",
-        ),
+        )
+        .one_of(&["paper", "lens", "code"]),
         OptionSpec::int(
             "blur_start",
             0,
             "cocog: first iteration through the CoC sets (plain 3DGS before); 0 = the variant's \
              (fitted to runs shorter than 7000 iterations; a resumed run's own)",
-        ),
+        )
+        .at_least(0.0),
         OptionSpec::int(
             "composite_start",
             0,
             "cocog: first iteration composited by the CNN F (the sets are averaged before); \
              0 = the variant's (fitted like blur_start)",
-        ),
+        )
+        .at_least(0.0),
         OptionSpec::optional(
             "coc_centred",
             OptionKind::Bool,
@@ -78,7 +82,8 @@ fn options() -> Vec<OptionSpec> {
             "cocog: initial learning rate of h_θ, F and the focus distances at the blur start, \
              decaying exponentially at 100× per run length (27× by the end of a 7000-iteration \
              run from 2000) (1e-3 in both sources; short runs learn the lens faster with more)",
-        ),
+        )
+        .between(0.0, 1.0),
         OptionSpec::optional(
             "focus_init",
             OptionKind::Path,
@@ -100,41 +105,50 @@ fn options() -> Vec<OptionSpec> {
              photo's focus again by depth from defocus against the current base Gaussians and \
              replace the learned one (0: never; the gradient alone moves a focus little, but \
              on a two-plane test scene half the runs locked every photo onto one plane)",
-        ),
+        )
+        .at_least(0.0),
         OptionSpec::int(
             "refocus_until",
             0,
             "cocog: last iteration refocus_every applies to (0: the end of the run)",
-        ),
+        )
+        .at_least(0.0),
         OptionSpec::optional(
             "coc_head_init",
             OptionKind::Float,
             "cocog: scale of h_θ's initial head weights (1 = PyTorch's default, as both sources; \
              smaller starts the CoC Gaussians near their base); default: 0.01 for lens, 1 for \
              code and paper",
-        ),
+        )
+        .between(0.0, 10.0),
         OptionSpec::int(
             "compositor_channels",
             64,
             "cocog: hidden channels of F (64 in the paper; fewer train faster on a CPU)",
-        ),
-        OptionSpec::int("iterations", 7000, "optimisation steps, one view each"),
+        )
+        .between(1.0, 256.0),
+        OptionSpec::int("iterations", 7000, "optimisation steps, one view each")
+            .between(1.0, f64::from(u32::MAX)),
         OptionSpec::int(
             "downscale",
             1,
             "train on images shrunk by this factor (intrinsics scaled to match)",
-        ),
+        )
+        .between(1.0, 64.0),
         OptionSpec::int(
             "seed",
             0,
             "seeds the view order, splits and random backgrounds",
-        ),
+        )
+        .at_least(0.0),
         OptionSpec::int(
             "coc_gaussians",
             0,
             "cocog: CoC Gaussians M per base Gaussian; 0 = the variant's (code 4, paper 5)",
-        ),
-        OptionSpec::int("sh_degree", 3, "largest spherical-harmonics degree, 0 to 3"),
+        )
+        .between(0.0, 16.0),
+        OptionSpec::int("sh_degree", 3, "largest spherical-harmonics degree, 0 to 3")
+            .between(0.0, 3.0),
         OptionSpec::string(
             "background",
             "0,0,0",
@@ -163,7 +177,8 @@ fn options() -> Vec<OptionSpec> {
             "checkpoint_every",
             1000,
             "iterations between checkpoints in checkpoint_dir; 0 only on interruption",
-        ),
+        )
+        .at_least(0.0),
         OptionSpec::optional(
             "live_log",
             OptionKind::Path,
@@ -177,7 +192,8 @@ fn options() -> Vec<OptionSpec> {
             0,
             "score the test views (PSNR, SSIM) every N iterations and at the end, into the \
              log as `eval` records; 0 never",
-        ),
+        )
+        .at_least(0.0),
     ];
     specs.extend(schedule::options());
     specs

@@ -254,7 +254,8 @@ pub fn options() -> Vec<OptionSpec> {
              (CoCoGaussian's released code: no opacity reset, depth-weighted pruning, densify \
              until 20000, point addition at 2500, λ 0.25, position lr 3.2e-4; cocog's default) or inria (the original \
              rules exactly)",
-        ),
+        )
+        .one_of(&["auto", "deblur", "inria"]),
         string(
             "scene_scale",
             "what the position learning rate and the world-space rules scale with: extent \
@@ -319,7 +320,8 @@ pub fn options() -> Vec<OptionSpec> {
              frame COLMAP's mapper leaves a reconstruction in, camera centres' robust box 10 \
              across: the released code's data, where it adds about 200k points) or scene (this \
              scene's own units; in metres it adds a handful) (scene)",
-        ),
+        )
+        .one_of(&["colmap", "scene"]),
         float(
             "lambda_dssim",
             "weight of D-SSIM in the loss (auto 0.2, deblur 0.25)",
