@@ -217,6 +217,15 @@ pub fn dispatch(cli: &Cli, ctx: &dyn Context) -> Result<()> {
                 Ok(s) => s,
                 // Mistakes in the file already name it.
                 Err(e @ cocog_pipeline::runner::RunError::Pipeline { .. }) => return Err(e.into()),
+                // The stage's own advice names its --resume; in a pipeline the run's is the one.
+                Err(e) if e.is_cancelled() => {
+                    ctx.warn(&format!(
+                        "continue the pipeline with `cocog run {} --resume`: finished stages \
+                         are kept and an interrupted training resumes from its checkpoint",
+                        a.pipeline.display()
+                    ));
+                    return Err(e.into());
+                }
                 Err(e) => {
                     return Err(
                         anyhow::Error::new(e).context(format!("pipeline {}", a.pipeline.display()))

@@ -208,3 +208,43 @@ fn a_sigkilled_pipeline_resumes_its_training_stage() {
     );
     assert!(test_psnr(&work.path().join("out")) > 15.0);
 }
+
+#[test]
+fn an_interrupted_pipeline_says_how_to_continue_it() {
+    let work = tempfile::tempdir().expect("tempdir");
+    write_defocus_dataset(&work.path().join("data"), &SynthConfig::tiny(4)).expect("synth");
+    let pipeline = work.path().join("p.toml");
+    std::fs::write(
+        &pipeline,
+        format!(
+            "[pipeline]\ninput = \"data\"\noutput = \"out\"\nstages = [\"ingest-llff\", \"train\"]\n\
+             [train]\nmethod = \"3dgs\"\niterations = 5000\ncheckpoint_every = {EVERY}\n"
+        ),
+    )
+    .expect("write pipeline");
+    // Far more iterations than it will run: the interrupt must find it still training.
+    let child = Command::new(cocog_bin())
+        .args(["run", path_str(&pipeline)])
+        .env_remove("COCOG_PLUGIN_PATH")
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn cocog");
+    let state = work.path().join("out.checkpoint/state.safetensors");
+    let started = Instant::now();
+    while !state.is_file() {
+        assert!(
+            started.elapsed() < Duration::from_secs(600),
+            "no checkpoint appeared"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let pid = child.id().to_string();
+    let sent = Command::new("kill").args(["-INT", &pid]).status();
+    assert!(sent.expect("kill -INT").success());
+    let out = child.wait_with_output().expect("wait");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(130), "{err}");
+    let said = format!("cocog run {} --resume", pipeline.display());
+    assert!(err.contains(&said), "{err}");
+}
