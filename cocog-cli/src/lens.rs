@@ -52,7 +52,9 @@ impl LensReport {
                 dir.display()
             );
         }
-        let truth = truth.or_else(|| find_transforms(&Scene::resolve(dir, &learned[0].0.image)));
+        let truth = truth
+            .or_else(|| find_transforms(&Scene::resolve(dir, &learned[0].0.image)))
+            .or_else(|| ingested_transforms(&scene));
         let (known, truth_centres) = match &truth {
             Some(path) => read_truth(path)?,
             None => Default::default(),
@@ -205,6 +207,17 @@ fn find_transforms(image: &Path) -> Option<PathBuf> {
     t.is_file().then_some(t)
 }
 
+/// `transforms.json` in the dataset the scene was ingested from: a downscaled ingest keeps its
+/// own resampled photos, so the photos' folder no longer leads to the dataset.
+fn ingested_transforms(scene: &Scene) -> Option<PathBuf> {
+    let ingest = scene
+        .history
+        .iter()
+        .find(|h| h.stage.starts_with("ingest"))?;
+    let t = Path::new(&ingest.input).join("transforms.json");
+    t.is_file().then_some(t)
+}
+
 /// Metres per scene unit as the comparison uses them (1 where unmeasured).
 fn metres_of(units: Option<UnitScale>) -> f64 {
     units
@@ -296,4 +309,30 @@ fn read_truth(path: &Path) -> Result<Truth> {
         .map(|(k, f)| (k, (f.focus_distance, f.aperture_radius.map(|r| 2.0 * r))))
         .collect();
     Ok((lenses, centres))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_ingested_dataset_gives_the_truth_when_the_photos_were_resampled() {
+        let data = tempfile::tempdir().unwrap();
+        let mut scene = Scene::default();
+        scene.history.push(cocog_pipeline::scene::HistoryEntry {
+            stage: "ingest-llff".into(),
+            provider: "built-in".into(),
+            input: data.path().display().to_string(),
+            options: serde_json::json!({"downscale": 4}),
+            resolved: None,
+            cocog_version: "test".into(),
+            finished_at: 0,
+        });
+        assert_eq!(ingested_transforms(&scene), None);
+        std::fs::write(data.path().join("transforms.json"), "{}").unwrap();
+        assert_eq!(
+            ingested_transforms(&scene),
+            Some(data.path().join("transforms.json"))
+        );
+    }
 }
