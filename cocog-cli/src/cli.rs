@@ -249,13 +249,14 @@ pub struct SceneToScene {
 pub struct DensifyArgs {
     #[command(flatten)]
     pub io: SceneToScene,
-    /// How many candidate points to add (Deblurring-3DGS uses about 200k).
+    /// How many candidate points to draw (Deblurring-3DGS uses about 200k). Default 200000.
     #[arg(long)]
     pub points: Option<u64>,
-    /// Random seed for the candidate points.
+    /// Random seed for the candidate points. Default 0.
     #[arg(long)]
     pub seed: Option<u64>,
-    /// Drop candidates with no input point within this distance (scene units).
+    /// Drop candidates with no input point within this distance (scene units). Default 2.0,
+    /// the reference code's, read in the scene's own units.
     #[arg(long = "max-distance", value_parser = finite)]
     pub max_distance: Option<f64>,
 }
@@ -264,10 +265,11 @@ pub struct DensifyArgs {
 pub struct PruneArgs {
     #[command(flatten)]
     pub io: SceneToScene,
-    /// Depth-weighted opacity below which a Gaussian is removed.
+    /// Depth-weighted opacity below which a Gaussian is removed. Default 0.005.
     #[arg(long, value_parser = finite)]
     pub threshold: Option<f64>,
-    /// Depth range factor of the weighting (Deblurring-3DGS).
+    /// Depth range factor of the weighting (Deblurring-3DGS): the threshold is divided by up
+    /// to this at the farthest z. Default 3.
     #[arg(long, value_parser = finite)]
     pub range: Option<f64>,
 }
@@ -373,7 +375,7 @@ pub struct TrainArgs {
     /// Train on images downscaled by N (intrinsics scaled to match). Default 1.
     #[arg(long)]
     pub downscale: Option<u32>,
-    /// Random seed (view order, splits, random backgrounds).
+    /// Random seed (view order, splits, random backgrounds). Default 0.
     #[arg(long)]
     pub seed: Option<u64>,
     /// Largest spherical-harmonics degree, 0 to 3. Default 3.
@@ -533,6 +535,7 @@ pub enum ExportFormat {
 
 #[derive(Args)]
 pub struct ExportArgs {
+    /// A trained scene (its gaussians.ply).
     pub scene: PathBuf,
     #[arg(long, value_enum)]
     pub format: ExportFormat,
@@ -561,6 +564,7 @@ pub struct RenderArgs {
     #[arg(long)]
     pub split: Option<String>,
     /// Render at the views' size divided by N (use the training --downscale to compare).
+    /// Default 1.
     #[arg(long)]
     pub downscale: Option<u32>,
     /// Background colour: black, white or R,G,B in 0..1. Default: the one the scene was
@@ -629,7 +633,7 @@ pub struct EvalArgs {
     #[arg(short, long)]
     pub output: Option<PathBuf>,
     /// LPIPS: auto (when weights are installed), require, or off. Install the weights once
-    /// with scripts/lpips/fetch-weights.sh.
+    /// with scripts/lpips/fetch-weights.sh. Default auto.
     #[arg(long)]
     pub lpips: Option<String>,
     /// Also compute LPIPS with the VGG-16 backbone (AlexNet is the papers' choice).
@@ -639,7 +643,7 @@ pub struct EvalArgs {
     /// else the user cache dir).
     #[arg(long = "lpips-weights")]
     pub lpips_weights: Option<PathBuf>,
-    /// Worker threads; 0 uses every core.
+    /// Worker threads; 0 uses every core. Default 0.
     #[arg(long)]
     pub threads: Option<u64>,
 }
@@ -654,9 +658,11 @@ pub enum ConvertTarget {
 
 #[derive(Args)]
 pub struct ConvertArgs {
+    /// A scene directory (cameras, poses, points).
     pub scene: PathBuf,
     #[arg(long, value_enum)]
     pub to: ConvertTarget,
+    /// The dataset folder to write.
     #[arg(short, long)]
     pub output: PathBuf,
 }
@@ -667,6 +673,7 @@ pub struct StageArgs {
     pub name: String,
     /// The input: a scene directory, or a dataset for ingest stages.
     pub input: PathBuf,
+    /// Where the stage writes: a scene directory, or a file for file stages.
     #[arg(short, long)]
     pub output: PathBuf,
     /// A stage option, KEY=VALUE; VALUE is read as JSON when it parses (numbers, true),
@@ -676,6 +683,19 @@ pub struct StageArgs {
 }
 
 #[derive(Args)]
+#[command(after_help = "A pipeline file (paths relative to it):
+  [pipeline]
+  input = \"data/defocuscozy2room\"
+  output = \"scene.ply\"
+  stages = [\"ingest-llff\", \"train\", \"prune\", \"export\"]
+  [ingest-llff]
+  downscale = 4
+  [train]
+  iterations = 7000
+  [export]
+  format = \"ply\"
+Each stage's output goes to OUTPUT.stages/NN-STAGE; option names and values are checked for
+every stage before the first one runs (`cocog plugins --json` lists each stage's options).")]
 pub struct RunArgs {
     /// The pipeline file (TOML): [pipeline] input, output, stages, plus one table of
     /// options per stage.
