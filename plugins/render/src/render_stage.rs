@@ -242,7 +242,8 @@ fn select(cameras: Vec<NamedCamera>, wanted: &[String]) -> Result<Vec<NamedCamer
                 .ok_or_else(|| {
                     let names: Vec<&str> = cameras.iter().map(|c| c.name.as_str()).collect();
                     StageError::Options(format!(
-                        "option 'views': no view named {w:?} in this split (views: {})",
+                        "option 'views': no view named {w:?} in this split (views: {}); \
+                         --split train or --split all chooses among the others",
                         names.join(", ")
                     ))
                 })
