@@ -61,6 +61,11 @@ fn main() -> ExitCode {
     // second one exits at once.
     let _ = ctrlc::set_handler(move || {
         if flag.swap(true, Ordering::SeqCst) {
+            eprintln!(
+                "\naborted: an output being written stays as a hidden .NAME.cocog-tmp-* folder \
+                 beside it (the next run onto it removes it); a training's last checkpoint is \
+                 kept"
+            );
             std::process::exit(i32::from(exit::CANCELLED));
         }
         eprintln!("\ncancelling: finishing the current step (Ctrl-C again to abort)");
