@@ -23,7 +23,7 @@ pub use splats::{read_splats, write_splats};
 
 use crate::error::{FormatError, Result};
 
-pub(crate) type Reader = PlyReader<Counted<BufReader<File>>>;
+pub(crate) type Reader = PlyReader<Counted<BufReader<std::io::Chain<File, &'static [u8]>>>>;
 
 /// How far into the file a header scan for `end_header` looks when the header does not parse.
 const HEADER_SCAN: usize = 1 << 20;
@@ -157,14 +157,30 @@ fn read_error(
     )
 }
 
+/// Whether the header (in its first 64 KiB) says `format ascii`; a header that does not read
+/// is the parser's to report.
+fn is_ascii(path: &Path) -> bool {
+    let mut head = Vec::new();
+    let read = File::open(path).and_then(|f| f.take(1 << 16).read_to_end(&mut head));
+    read.is_ok()
+        && head
+            .split(|&b| b == b'\n')
+            .take_while(|line| !line.starts_with(b"end_header"))
+            .any(|line| line.starts_with(b"format ascii"))
+}
+
 /// Opens a PLY file, parses its header and positions the reader at the `vertex` element.
 /// Returns the reader and the vertex element definition.
 pub(crate) fn open_at_vertex(path: &Path) -> Result<Opened> {
     let file = File::open(path).map_err(|e| FormatError::io(path, e))?;
     let file_len = file.metadata().map_err(|e| FormatError::io(path, e))?.len();
     let pos = Rc::new(Cell::new(0));
+    // serde-ply reads each ascii value up to the whitespace after it, so a file whose last value
+    // ends it would read as truncated: give such a file the newline it lacks. A binary body
+    // gets nothing, or a truncated one could read the newline as its last byte.
+    let tail: &'static [u8] = if is_ascii(path) { b"\n" } else { b"" };
     let mut reader = PlyReader::from_reader(Counted {
-        inner: BufReader::with_capacity(1 << 20, file),
+        inner: BufReader::with_capacity(1 << 20, file.chain(tail)),
         pos: Rc::clone(&pos),
     })
     .map_err(|e| header_error(path, file_len, e))?;
@@ -227,7 +243,7 @@ pub(crate) fn open_at_vertex(path: &Path) -> Result<Opened> {
         }
         let extra = u128::from(file_len) - offset;
         if let (Some(last), Some(&row)) = (header.elem_defs.last(), sizes.last())
-            && extra > 0
+            && extra >= u128::from(row.max(1))
         {
             return Err(trailing_error(path, last, extra, row));
         }
@@ -321,16 +337,22 @@ impl Opened {
         if extra == 0 {
             return Ok(());
         }
-        if self.header.format != PlyFormat::Ascii {
+        // Fewer bytes than a row (padding, a final newline; other readers ignore them) is no
+        // sign of a wrong count.
+        let row = row_bytes(last);
+        if self.header.format != PlyFormat::Ascii && row.is_some_and(|r| extra < r.max(1)) {
+            return Ok(());
+        }
+        if self.header.format != PlyFormat::Ascii && row.is_some() {
             return Err(trailing_error(
                 path,
                 last,
                 u128::from(extra),
-                row_bytes(last).unwrap_or(0),
+                row.unwrap_or(0),
             ));
         }
-        // Ascii: trailing blank lines and spaces are common and harmless; anything else is data
-        // the header does not declare.
+        // Ascii, or rows of lists: trailing blank lines and spaces are common and harmless;
+        // anything else is data the header does not declare.
         let mut rest = File::open(path).map_err(|e| FormatError::io(path, e))?;
         rest.seek(SeekFrom::Start(end))
             .map_err(|e| FormatError::io(path, e))?;
