@@ -694,8 +694,10 @@ pub struct StageArgs {
   iterations = 7000
   [export]
   format = \"ply\"
-Each stage's output goes to OUTPUT.stages/NN-STAGE; option names and values are checked for
-every stage before the first one runs (`cocog plugins --json` lists each stage's options).")]
+The last stage writes OUTPUT, the others OUTPUT.stages/NN-STAGE. Every stage's option names,
+types, ranges and choices are checked before the first stage runs (`cocog plugins --json`
+lists them); values that depend on the input (a blur start past the run's end) are checked
+when their stage starts.")]
 pub struct RunArgs {
     /// The pipeline file (TOML): [pipeline] input, output, stages, plus one table of
     /// options per stage.

@@ -214,8 +214,10 @@ fn ingested_transforms(scene: &Scene) -> Option<PathBuf> {
         .history
         .iter()
         .find(|h| h.stage.starts_with("ingest"))?;
-    let t = Path::new(&ingest.input).join("transforms.json");
-    t.is_file().then_some(t)
+    // A relative input was relative to wherever ingest ran, which this process cannot know.
+    let dataset = Path::new(&ingest.input);
+    let t = dataset.join("transforms.json");
+    (dataset.is_absolute() && t.is_file()).then_some(t)
 }
 
 /// Metres per scene unit as the comparison uses them (1 where unmeasured).
@@ -334,5 +336,9 @@ mod tests {
             ingested_transforms(&scene),
             Some(data.path().join("transforms.json"))
         );
+        // Relative to wherever ingest ran: not guessed at, though from this test's folder (the
+        // crate's) it names a dataset with a transforms.json where ../shared is beside.
+        scene.history[0].input = "../../shared/bench/defocus-dev/dev-table".into();
+        assert_eq!(ingested_transforms(&scene), None);
     }
 }

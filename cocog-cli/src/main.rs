@@ -62,9 +62,9 @@ fn main() -> ExitCode {
     let _ = ctrlc::set_handler(move || {
         if flag.swap(true, Ordering::SeqCst) {
             eprintln!(
-                "\naborted: an output being written stays as a hidden .NAME.cocog-tmp-* folder \
-                 beside it (the next run onto it removes it); a training's last checkpoint is \
-                 kept"
+                "\naborted: an output being written stays as a hidden .NAME.cocog-tmp-* file or \
+                 folder beside it (the next run onto it removes it); a training's last \
+                 checkpoint is kept"
             );
             std::process::exit(i32::from(exit::CANCELLED));
         }

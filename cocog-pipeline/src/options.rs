@@ -206,7 +206,14 @@ impl Options {
                 // A text option whose text can be a number (a distance or "from:VIEW") takes a
                 // bare JSON number too, as its text.
                 Some(v) if spec.kind == OptionKind::String && v.is_number() => {
-                    out.insert(spec.name.clone(), Value::String(v.to_string()));
+                    let text = Value::String(v.to_string());
+                    if let Some(why) = spec.not_a_choice(&text) {
+                        return Err(StageError::Options(format!(
+                            "stage '{stage}' option '{}': {why}, got {v}",
+                            spec.name
+                        )));
+                    }
+                    out.insert(spec.name.clone(), text);
                 }
                 Some(v) if spec.kind.accepts(v) => {
                     if let Some(why) = spec.out_of_range(v).or_else(|| spec.not_a_choice(v)) {
@@ -329,6 +336,11 @@ mod tests {
     fn texts_outside_their_choices_are_refused() {
         let s = vec![OptionSpec::string("format", "ply", "").one_of(&["ply", "glb", "spz"])];
         assert!(Options::validate("s", &s, &map(json!({"format": "glb"}))).is_ok());
+        let e = Options::validate("s", &s, &map(json!({"format": 3}))).unwrap_err();
+        assert!(
+            e.to_string().contains("expected ply, glb or spz, got 3"),
+            "{e}"
+        );
         let e = Options::validate("s", &s, &map(json!({"format": "obj"}))).unwrap_err();
         assert!(
             e.to_string()

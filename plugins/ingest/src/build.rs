@@ -182,15 +182,14 @@ pub(crate) fn build_scene(
     let hold = settings.hold.or(data.hold_marker).unwrap_or(8);
     let use_declared = settings.hold.is_none() && declared;
     if hold == 1 && !use_declared {
-        let from = if settings.hold.is_some() {
-            "--hold 1".to_owned()
+        let why = "makes every view a test view, leaving none to train on: use --hold 8 (every \
+                   8th view held out) or --hold 0 (every view trains)";
+        // The option is the user's mistake (a usage error); the marker is the dataset's.
+        return Err(if settings.hold.is_some() {
+            StageError::Options(format!("--hold 1 {why}"))
         } else {
-            format!("{}'s hold=1 marker", dataset.display())
-        };
-        return Err(StageError::Input(format!(
-            "{from} makes every view a test view, leaving none to train on: use --hold 8 (every \
-             8th view held out) or --hold 0 (every view trains)"
-        )));
+            StageError::Input(format!("{}'s hold=1 marker {why}", dataset.display()))
+        });
     }
     let some = data.views.iter().filter(|v| v.split.is_some()).count();
     if settings.hold.is_none() && !declared && some > 0 {

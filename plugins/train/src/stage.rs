@@ -83,7 +83,7 @@ fn options() -> Vec<OptionSpec> {
              decaying exponentially at 100× per run length (27× by the end of a 7000-iteration \
              run from 2000) (1e-3 in both sources; short runs learn the lens faster with more)",
         )
-        .between(0.0, 1.0),
+        .between(1e-12, 1.0),
         OptionSpec::optional(
             "focus_init",
             OptionKind::Path,
