@@ -483,11 +483,12 @@ fn photos_that_do_not_register_are_named_with_the_reason() {
 fn a_bad_focal_factor_is_refused() {
     let work = tempfile::tempdir().unwrap();
     let out = work.path().join("s");
-    // (value, exit status, text): the stage's range check, or the CLI's for a non-number.
+    // (value, exit status, text): the stage's range check or the CLI's for a non-number, both
+    // usage errors.
     let cases = [
-        ("0", 1, "0.1 to 10"),
-        ("-1", 1, "0.1 to 10"),
-        ("50", 1, "0.1 to 10"),
+        ("0", 2, "0.1 to 10"),
+        ("-1", 2, "0.1 to 10"),
+        ("50", 2, "0.1 to 10"),
         ("nan", 2, "not a finite number"),
     ];
     for (bad, code, why) in cases {

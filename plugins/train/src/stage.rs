@@ -386,7 +386,8 @@ fn refuse_foreign_checkpoint(plan: &Plan) -> Result<(), StageError> {
     if resumes_it {
         return Ok(());
     }
-    Err(StageError::Options(format!(
+    // Exit 1 like "output already exists": the state of the output, not a flag, refuses it.
+    Err(StageError::Input(format!(
         "{} holds the checkpoint of an interrupted run; continue it with --resume {} (in a \
          pipeline: cocog run --resume), or remove it to start afresh",
         dir.display(),

@@ -285,8 +285,10 @@ fn cocog_method_and_missing_points_are_clear_errors() {
     )
     .unwrap_err();
     assert!(matches!(err, StageError::Options(_)));
+    // Refused by the option table's choices, before the stage starts.
     assert!(
-        err.to_string().contains("unknown variant 'pinhole'"),
+        err.to_string()
+            .contains("'coc_variant': expected paper, lens or code, got \"pinhole\""),
         "{err}"
     );
     let err = run(
