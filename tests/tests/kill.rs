@@ -166,19 +166,27 @@ fn sigkilled_training_resumes_to_the_uninterrupted_result() {
     );
 }
 
-#[test]
-fn a_sigkilled_pipeline_resumes_its_training_stage() {
-    let work = tempfile::tempdir().expect("tempdir");
-    write_defocus_dataset(&work.path().join("data"), &SynthConfig::tiny(4)).expect("synth");
-    let pipeline = work.path().join("p.toml");
+/// `root/p.toml`: ingest `root/data` (a tiny synthetic dataset, written here), then a 3dgs
+/// training into `root/out` checkpointing every EVERY iterations, with `train` (TOML lines)
+/// added to its table.
+fn training_pipeline(root: &Path, train: &str) -> PathBuf {
+    write_defocus_dataset(&root.join("data"), &SynthConfig::tiny(4)).expect("synth");
+    let pipeline = root.join("p.toml");
     std::fs::write(
         &pipeline,
         format!(
             "[pipeline]\ninput = \"data\"\noutput = \"out\"\nstages = [\"ingest-llff\", \"train\"]\n\
-             [train]\nmethod = \"3dgs\"\niterations = {ITERATIONS}\ncheckpoint_every = {EVERY}\nseed = 5\n"
+             [train]\nmethod = \"3dgs\"\ncheckpoint_every = {EVERY}\n{train}\n"
         ),
     )
     .expect("write pipeline");
+    pipeline
+}
+
+#[test]
+fn a_sigkilled_pipeline_resumes_its_training_stage() {
+    let work = tempfile::tempdir().expect("tempdir");
+    let pipeline = training_pipeline(work.path(), &format!("iterations = {ITERATIONS}\nseed = 5"));
     // Training is the last stage, so its checkpoint sits beside the pipeline's output.
     let ckpt = work.path().join("out.checkpoint");
     kill_after_checkpoints(spawn(&["run", path_str(&pipeline)]), &ckpt);
@@ -212,16 +220,7 @@ fn a_sigkilled_pipeline_resumes_its_training_stage() {
 #[test]
 fn an_interrupted_pipeline_says_how_to_continue_it() {
     let work = tempfile::tempdir().expect("tempdir");
-    write_defocus_dataset(&work.path().join("data"), &SynthConfig::tiny(4)).expect("synth");
-    let pipeline = work.path().join("p.toml");
-    std::fs::write(
-        &pipeline,
-        format!(
-            "[pipeline]\ninput = \"data\"\noutput = \"out\"\nstages = [\"ingest-llff\", \"train\"]\n\
-             [train]\nmethod = \"3dgs\"\niterations = 5000\ncheckpoint_every = {EVERY}\n"
-        ),
-    )
-    .expect("write pipeline");
+    let pipeline = training_pipeline(work.path(), "iterations = 5000");
     // Far more iterations than it will run: the interrupt must find it still training.
     let child = Command::new(cocog_bin())
         .args(["run", path_str(&pipeline)])

@@ -78,86 +78,57 @@ fn pipeline_mistakes_fail_before_any_stage_runs() {
     let work = tempfile::tempdir().expect("tempdir");
     std::fs::create_dir(work.path().join("dataset")).expect("mkdir");
     let pipeline = work.path().join("p.toml");
+    // Writes `text` as the pipeline and runs it: exit `code` and every needle on stderr.
+    let refused = |text: &str, code: i32, needles: &[&str]| {
+        std::fs::write(&pipeline, text).expect("write");
+        let out = cocog(&["run", path_str(&pipeline)]);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(code), "{err}");
+        for n in needles {
+            assert!(err.contains(n), "{n:?} not in {err}");
+        }
+    };
+    let head = "[pipeline]\ninput = \"dataset\"\noutput = \"out\"\n";
 
-    std::fs::write(
-        &pipeline,
-        "[pipeline]\ninput = \"dataset\"\noutput = \"out\"\nstages = [\"ingest-colmap\", \"no-such-stage\"]\n",
-    )
-    .expect("write");
-    let out = cocog(&["run", path_str(&pipeline)]);
-    assert_eq!(out.status.code(), Some(3), "{}", stderr(&out));
-    assert!(stderr(&out).contains("no-such-stage"), "{}", stderr(&out));
-
-    std::fs::write(
-        &pipeline,
-        "[pipeline]\ninput = \"dataset\"\noutput = \"out\"\nstages = [\"ingest-colmap\"]\n[densfy]\npoints = 1\n",
-    )
-    .expect("write");
-    let out = cocog(&["run", path_str(&pipeline)]);
-    assert_eq!(out.status.code(), Some(2));
-    assert!(
-        stderr(&out).contains("p.toml") && stderr(&out).contains("[densfy]"),
-        "{}",
-        stderr(&out)
+    refused(
+        &format!("{head}stages = [\"ingest-colmap\", \"no-such-stage\"]\n"),
+        3,
+        &["no-such-stage"],
     );
-
-    std::fs::write(
-        &pipeline,
-        "[pipeline]\ninput = \"dataset\"\noutput = \"out\"\nstages = [\"ingest-colmap\", \"render\", \"eval-scene\"]\n",
-    )
-    .expect("write");
-    let out = cocog(&["run", path_str(&pipeline)]);
-    assert_eq!(out.status.code(), Some(2));
-    assert!(
-        stderr(&out).contains("'render'") && stderr(&out).contains("does not write a scene"),
-        "{}",
-        stderr(&out)
+    refused(
+        &format!("{head}stages = [\"ingest-colmap\"]\n[densfy]\npoints = 1\n"),
+        2,
+        &["p.toml", "[densfy]"],
     );
-
+    refused(
+        &format!("{head}stages = [\"ingest-colmap\", \"render\", \"eval-scene\"]\n"),
+        2,
+        &["'render'", "does not write a scene"],
+    );
     // An option typo, or a value JSON cannot carry, in a later stage's table.
-    std::fs::write(
-        &pipeline,
-        "[pipeline]\ninput = \"dataset\"\noutput = \"out\"\nstages = [\"ingest-colmap\", \"densify\", \"export\"]\n[export]\nformt = \"glb\"\n",
-    )
-    .expect("write");
-    let out = cocog(&["run", path_str(&pipeline)]);
-    assert_eq!(out.status.code(), Some(2));
-    assert!(
-        stderr(&out).contains("no option 'formt'"),
-        "{}",
-        stderr(&out)
+    refused(
+        &format!(
+            "{head}stages = [\"ingest-colmap\", \"densify\", \"export\"]\n[export]\nformt = \"glb\"\n"
+        ),
+        2,
+        &["no option 'formt'"],
     );
-    std::fs::write(
-        &pipeline,
-        "[pipeline]\ninput = \"dataset\"\noutput = \"out\"\nstages = [\"ingest-colmap\", \"densify\"]\n[densify]\nmax-distance = nan\n",
-    )
-    .expect("write");
-    let out = cocog(&["run", path_str(&pipeline)]);
-    assert_eq!(out.status.code(), Some(2));
-    assert!(
-        stderr(&out).contains("[densify] option 'max-distance': NaN is not a finite number"),
-        "{}",
-        stderr(&out)
+    refused(
+        &format!(
+            "{head}stages = [\"ingest-colmap\", \"densify\"]\n[densify]\nmax-distance = nan\n"
+        ),
+        2,
+        &["[densify] option 'max-distance': NaN is not a finite number"],
     );
-
     // A value the last stage refuses stops the run before the first stage, not after it.
-    std::fs::write(
-        &pipeline,
-        "[pipeline]\ninput = \"dataset\"\noutput = \"out\"\nstages = [\"ingest-colmap\", \"densify\", \"export\"]\n[export]\nformat = \"obj\"\n",
-    )
-    .expect("write");
-    let out = cocog(&["run", path_str(&pipeline)]);
-    assert_eq!(out.status.code(), Some(2));
-    assert!(
-        stderr(&out).contains("'format': expected ply, glb or spz, got \"obj\""),
-        "{}",
-        stderr(&out)
+    refused(
+        &format!(
+            "{head}stages = [\"ingest-colmap\", \"densify\", \"export\"]\n[export]\nformat = \"obj\"\n"
+        ),
+        2,
+        &["'format': expected ply, glb or spz, got \"obj\""],
     );
-
-    std::fs::write(&pipeline, "[pipeline]\ninput = 3\n").expect("write");
-    let out = cocog(&["run", path_str(&pipeline)]);
-    assert_eq!(out.status.code(), Some(2));
-    assert!(stderr(&out).contains("p.toml"), "{}", stderr(&out));
+    refused("[pipeline]\ninput = 3\n", 2, &["p.toml"]);
     assert_eq!(listing(work.path()), vec!["dataset", "p.toml"]);
 }
 
