@@ -92,8 +92,25 @@ fn frame_buffer<T>(w: u32, h: u32, what: &str) -> Result<Vec<T>, EngineError> {
         EngineError::Invalid(format!(
             "a {w}×{h} frame needs {:.1} GB of host memory for its {what} alone, which this \
              machine cannot allocate: check the camera's width and height",
-            (pixels * std::mem::size_of::<T>()) as f64 / 1e9
+            pixels as f64 * std::mem::size_of::<T>() as f64 / 1e9
         ))
     })?;
     Ok(v)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_frame_too_large_to_allocate_is_an_error_naming_its_size() {
+        // Past isize::MAX bytes, so refused the same way on every machine, overcommit or not.
+        let e = frame_buffer::<[f32; 3]>(u32::MAX, u32::MAX, "colour").unwrap_err();
+        let said = e.to_string();
+        assert!(
+            said.contains("4294967295×4294967295") && said.contains("colour"),
+            "{said}"
+        );
+        assert!(frame_buffer::<f32>(4, 3, "alpha").unwrap().capacity() >= 12);
+    }
 }
