@@ -14,34 +14,42 @@ pub struct NamedCamera {
     /// The view's photo, resolved against the scene directory.
     pub image: PathBuf,
     pub camera: Camera,
+    /// The stem its render is written under: see [`output_stems`].
+    pub output: String,
 }
 
 impl NamedCamera {
     /// The view name without its extension: `000.png` → `000`.
     pub fn stem(&self) -> String {
-        Path::new(&self.name)
-            .file_stem()
-            .map_or_else(|| self.name.clone(), |s| s.to_string_lossy().into_owned())
+        stem_of(&self.name)
     }
 }
 
-/// Output file stems for `cams`, one each and all different: the view's stem, or where views
-/// share it (NeRF-synthetic's `train/r_0.png` and `test/r_0.png`) its whole name without the
-/// extension, folders joined by `_`, and an index past that, so no render overwrites another
-/// and renders still pair with their photos by name.
-pub fn output_stems(cams: &[NamedCamera]) -> Vec<String> {
+fn stem_of(name: &str) -> String {
+    Path::new(name)
+        .file_stem()
+        .map_or_else(|| name.to_owned(), |s| s.to_string_lossy().into_owned())
+}
+
+/// Output file stems for views named `names`, one each and all different: the view's stem, or
+/// where views share it (NeRF-synthetic's `train/r_0.png` and `test/r_0.png`) its whole name
+/// without the extension, folders joined by `_`, and an index past that, so no render
+/// overwrites another and renders still pair with their photos by name. A scene's views are
+/// named over all its splits, so a view's render has one name whichever split is rendered.
+pub fn output_stems(names: &[&str]) -> Vec<String> {
     let mut shared = std::collections::HashMap::new();
-    for c in cams {
-        *shared.entry(c.stem()).or_insert(0u32) += 1;
+    for name in names {
+        *shared.entry(stem_of(name)).or_insert(0u32) += 1;
     }
     let mut used = std::collections::HashSet::new();
-    cams.iter()
-        .map(|c| {
-            let stem = c.stem();
+    names
+        .iter()
+        .map(|name| {
+            let stem = stem_of(name);
             let base = if shared[&stem] == 1 {
                 stem
             } else {
-                let whole = c.name.rsplit_once('.').map_or(c.name.as_str(), |(s, _)| s);
+                let whole = name.rsplit_once('.').map_or(*name, |(s, _)| s);
                 whole.replace(['/', '\\'], "_")
             };
             let mut name = base.clone();
@@ -83,10 +91,12 @@ pub fn split_cameras(
     split: Option<Split>,
     downscale: u32,
 ) -> Result<Vec<NamedCamera>, StageError> {
+    let names: Vec<&str> = scene.views.iter().map(|v| v.name.as_str()).collect();
     let views: Vec<_> = scene
         .views
         .iter()
-        .filter(|v| split.is_none_or(|s| v.split == s))
+        .zip(output_stems(&names))
+        .filter(|(v, _)| split.is_none_or(|s| v.split == s))
         .collect();
     if views.is_empty() {
         let which = split.map_or("any", split_name);
@@ -105,7 +115,7 @@ pub fn split_cameras(
     }
     views
         .into_iter()
-        .map(|view| {
+        .map(|(view, output)| {
             let cam = scene.camera(view.camera).ok_or_else(|| {
                 StageError::Input(format!(
                     "{}: scene.json view {:?} names camera {}, which does not exist",
@@ -128,6 +138,7 @@ pub fn split_cameras(
                 name: view.name.clone(),
                 image: Scene::resolve(scene_dir, &view.image),
                 camera: full.resized(w, h),
+                output,
             })
         })
         .collect()
@@ -137,42 +148,21 @@ pub fn split_cameras(
 mod tests {
     use super::*;
 
-    fn named(name: &str) -> NamedCamera {
-        let mut pose = [[0.0; 4]; 4];
-        (0..4).for_each(|i| pose[i][i] = 1.0);
-        NamedCamera {
-            name: name.to_owned(),
-            image: PathBuf::from(name),
-            camera: Camera {
-                fx: 1.0,
-                fy: 1.0,
-                cx: 1.0,
-                cy: 1.0,
-                width: 2,
-                height: 2,
-                world_from_camera: pose,
-            },
-        }
-    }
-
     #[test]
     fn views_that_share_a_stem_get_distinct_output_names() {
-        let cams: Vec<_> = [
+        let names = [
             "train/r_0.png",
             "test/r_0.png",
             "r_1.png",
             "a.png",
             "a.png",
             "test_r_0.jpg",
-        ]
-        .map(named)
-        .into();
+        ];
         assert_eq!(
-            output_stems(&cams),
+            output_stems(&names),
             ["train_r_0", "test_r_0", "r_1", "a", "a-1", "test_r_0-1"]
         );
         // Unique stems stay the plain stems that pair with photos by name.
-        let plain: Vec<_> = ["000.png", "008.png"].map(named).into();
-        assert_eq!(output_stems(&plain), ["000", "008"]);
+        assert_eq!(output_stems(&["000.png", "008.png"]), ["000", "008"]);
     }
 }

@@ -26,8 +26,8 @@ fn ground_truth(
     let mut scene = cocog_pipeline::Scene::load(scene_dir)?;
     scene.rebase(scene_dir)?;
     let views = split_cameras(&scene, scene_dir, job.split, job.downscale)?;
-    let stems = crate::cameras::output_stems(&views);
-    for (i, (view, stem)) in views.iter().zip(&stems).enumerate() {
+    for (i, view) in views.iter().enumerate() {
+        let stem = &view.output;
         ctx.check_cancelled()?;
         ctx.progress("ground truth", i as u64, views.len() as u64);
         // write_downscaled always encodes PNG (lossless, even for a JPEG photo at factor 1).
@@ -44,10 +44,7 @@ fn ground_truth(
             )));
         }
     }
-    Ok(stems
-        .into_iter()
-        .zip(views.into_iter().map(|v| v.image))
-        .collect())
+    Ok(views.into_iter().map(|v| (v.output, v.image)).collect())
 }
 
 /// The report names the scratch folders, which are gone once the stage returns: point at the

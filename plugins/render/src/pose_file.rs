@@ -11,6 +11,7 @@ use cocog_pipeline::{Scene, Split, StageError};
 use serde::Deserialize;
 
 use crate::NamedCamera;
+use crate::cameras::output_stems;
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -60,7 +61,7 @@ pub fn cameras_from_file(
         .find(|v| v.split == Split::Train)
         .or(scene.views.first())
         .map(|v| v.camera);
-    poses
+    let mut cams = poses
         .into_iter()
         .enumerate()
         .map(|(i, p)| {
@@ -93,7 +94,14 @@ pub fn cameras_from_file(
                 name: p.name.unwrap_or_else(|| format!("camera-{i:03}")),
                 image: path.to_path_buf(),
                 camera: full.resized(w, h),
+                output: String::new(),
             })
         })
-        .collect()
+        .collect::<Result<Vec<_>, StageError>>()?;
+    let names: Vec<&str> = cams.iter().map(|c| c.name.as_str()).collect();
+    let stems = output_stems(&names);
+    for (c, output) in std::iter::zip(&mut cams, stems) {
+        c.output = output;
+    }
+    Ok(cams)
 }

@@ -116,6 +116,7 @@ pub(crate) fn render_views(
         None => select(
             split_cameras(&scene, scene_dir, job.split, job.downscale)?,
             &job.views,
+            job.split,
         )?,
     };
     if !job.sweep.is_empty() && cameras.len() != 1 {
@@ -164,10 +165,9 @@ pub(crate) fn render_views(
     let mut lenses = Vec::new();
     // A sweep renders its one view once per focus distance, into numbered frames.
     let frames: Vec<(String, &NamedCamera, Option<RefocusJob>)> = if job.sweep.is_empty() {
-        crate::cameras::output_stems(&cameras)
-            .into_iter()
-            .zip(&cameras)
-            .map(|(stem, v)| (stem, v, job.refocus.clone()))
+        cameras
+            .iter()
+            .map(|v| (v.output.clone(), v, job.refocus.clone()))
             .collect()
     } else {
         let base = job.refocus.clone().ok_or_else(|| {
@@ -227,8 +227,13 @@ pub(crate) fn render_views(
     }))
 }
 
-/// The cameras named in `wanted` (names or stems), in that order; all when it is empty.
-fn select(cameras: Vec<NamedCamera>, wanted: &[String]) -> Result<Vec<NamedCamera>, StageError> {
+/// The cameras named in `wanted` (names, stems or render names), in that order; all when it is
+/// empty. `split` is the split they were chosen from (None: all views), for the error's hint.
+fn select(
+    cameras: Vec<NamedCamera>,
+    wanted: &[String],
+    split: Option<Split>,
+) -> Result<Vec<NamedCamera>, StageError> {
     if wanted.is_empty() {
         return Ok(cameras);
     }
@@ -237,13 +242,26 @@ fn select(cameras: Vec<NamedCamera>, wanted: &[String]) -> Result<Vec<NamedCamer
         .map(|w| {
             cameras
                 .iter()
-                .find(|c| &c.name == w || &c.stem() == w)
+                .find(|c| &c.name == w || &c.stem() == w || &c.output == w)
                 .cloned()
                 .ok_or_else(|| {
                     let names: Vec<&str> = cameras.iter().map(|c| c.name.as_str()).collect();
+                    let hint = match split {
+                        Some(s) => {
+                            let other = match s {
+                                Split::Train => Split::Test,
+                                Split::Test => Split::Train,
+                            };
+                            format!(
+                                "; --split {} or --split all chooses among the others",
+                                crate::split_name(other)
+                            )
+                        }
+                        None => String::new(),
+                    };
+                    let which = split.map_or("the scene", |s| crate::split_name(s));
                     StageError::Options(format!(
-                        "option 'views': no view named {w:?} in this split (views: {}); \
-                         --split train or --split all chooses among the others",
+                        "option 'views': no view named {w:?} in {which} (views: {}){hint}",
                         names.join(", ")
                     ))
                 })

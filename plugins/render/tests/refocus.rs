@@ -222,7 +222,7 @@ fn bad_refocus_requests_name_what_is_wrong_and_write_nothing() {
         ),
         (
             json!({"focus_distance": "2", "views": "q"}),
-            "no view named \"q\" in this split (views: a.png); --split train",
+            "no view named \"q\" in test (views: a.png); --split train",
         ),
         (json!({"focus_at": "3"}), "X,Y"),
         (

@@ -73,3 +73,50 @@ fn downscaled_cameras_scale_every_intrinsic_by_the_size_ratio() {
     let all = cocog_render::split_cameras(&scene, tmp.path(), None, 1).unwrap();
     assert_eq!(all.len(), 2);
 }
+
+#[test]
+fn a_view_renders_under_one_name_whichever_split_is_chosen() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (png, _) = reference_png();
+    write_scene(tmp.path(), &png);
+    let mut scene = Scene::load(tmp.path()).unwrap();
+    // NeRF-synthetic's layout: a test and a training view share the stem r_0.
+    scene.views[0].name = "test/r_0.png".into();
+    scene.views[1].name = "train/r_0.png".into();
+    scene.save(tmp.path()).unwrap();
+    let outputs = |split| {
+        cocog_render::split_cameras(&scene, tmp.path(), split, 1)
+            .unwrap()
+            .into_iter()
+            .map(|c| c.output)
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(outputs(Some(Split::Test)), ["test_r_0"]);
+    assert_eq!(outputs(Some(Split::Train)), ["train_r_0"]);
+    assert_eq!(outputs(None), ["test_r_0", "train_r_0"]);
+}
+
+#[test]
+fn an_unknown_view_is_named_with_the_split_it_was_looked_for_in() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (png, _) = reference_png();
+    let scene = tmp.path().join("scene");
+    write_scene(&scene, &png);
+    let out = tmp.path().join("out");
+    std::fs::create_dir(&out).unwrap();
+    let err = |given| {
+        run(stage("render").as_ref(), &scene, &out, given)
+            .unwrap_err()
+            .to_string()
+    };
+    let test = err(json!({"views": "b"}));
+    assert!(
+        test.contains("no view named \"b\" in test (views: a.png); --split train or --split all"),
+        "{test}"
+    );
+    let train = err(json!({"views": "a", "split": "train"}));
+    assert!(train.contains("--split test or --split all"), "{train}");
+    let all = err(json!({"views": "c", "split": "all"}));
+    assert!(all.contains("in the scene (views: a.png, b.png)"), "{all}");
+    assert!(!all.contains("--split"), "{all}");
+}
