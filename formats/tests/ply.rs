@@ -345,55 +345,80 @@ PlyData([PlyElement.describe(arr, 'vertex')]).write(sys.argv[2])
     );
 }
 
+/// Overwrites vertex `v`'s values from column `col` on in a binary little-endian splat PLY
+/// (SH degree 1: 26 floats a row).
+fn patch_row(path: &Path, v: usize, col: usize, vals: &[f32]) {
+    let mut bytes = std::fs::read(path).unwrap();
+    let end = b"end_header\n";
+    let body = bytes.windows(end.len()).position(|w| w == end).unwrap() + end.len();
+    for (k, x) in vals.iter().enumerate() {
+        let at = body + 4 * (26 * v + col + k);
+        bytes[at..at + 4].copy_from_slice(&x.to_le_bytes());
+    }
+    std::fs::write(path, bytes).unwrap();
+}
+
 #[test]
 fn non_finite_or_zero_rotation_splats_are_refused() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let good = random_splats(20, 1, 11);
-    type Spoil = fn(&mut Splats);
-    let cases: [(&str, Spoil, &str); 7] = [
-        ("x", |s| s.means[3 * 17] = f32::NAN, "vertex 17: x is NaN"),
-        (
-            "z",
-            |s| s.means[3 * 2 + 2] = f32::INFINITY,
-            "vertex 2: z is inf",
-        ),
-        (
-            "opacity",
-            |s| s.opacities[5] = f32::NAN,
-            "vertex 5: opacity is NaN",
-        ),
+    // (name, vertex, first column, values, the reader's message); columns at SH degree 1:
+    // x y z nx ny nz f_dc_0..2 f_rest_0..8 opacity scale_0..2 rot_0..3.
+    let cases: [(&str, usize, usize, &[f32], &str); 7] = [
+        ("x", 17, 0, &[f32::NAN], "vertex 17: x is NaN"),
+        ("z", 2, 2, &[f32::INFINITY], "vertex 2: z is inf"),
+        ("opacity", 5, 18, &[f32::NAN], "vertex 5: opacity is NaN"),
         (
             "scale",
-            |s| s.log_scales[3 * 9 + 1] = f32::NEG_INFINITY,
+            9,
+            20,
+            &[f32::NEG_INFINITY],
             "vertex 9: scale_1 is -inf",
         ),
-        (
-            "rot",
-            |s| s.rotations[4 * 4 + 3] = f32::NAN,
-            "vertex 4: rot_3 is NaN",
-        ),
-        (
-            "rest",
-            |s| s.sh_rest[9 * 6 + 8] = f32::NAN,
-            "vertex 6: f_rest_8 is NaN",
-        ),
+        ("rot", 4, 25, &[f32::NAN], "vertex 4: rot_3 is NaN"),
+        ("rest", 6, 17, &[f32::NAN], "vertex 6: f_rest_8 is NaN"),
         (
             "zero",
-            |s| s.rotations[4 * 3..4 * 3 + 4].fill(0.0),
+            3,
+            22,
+            &[0.0; 4],
             "vertex 3: rot_0..rot_3 are all zero",
         ),
     ];
-    for (name, spoil, expect) in cases {
-        let mut s = good.clone();
-        spoil(&mut s);
+    for (name, v, col, vals, expect) in cases {
         let p = d.join(format!("gaussians-{name}.ply"));
-        write_splats(&p, &s, None).unwrap();
+        write_splats(&p, &good, None).unwrap();
+        patch_row(&p, v, col, vals);
         let e = read_splats(&p).unwrap_err().to_string();
         assert!(
             e.contains(&format!("gaussians-{name}.ply")) && e.contains(expect),
             "{name}: {e}"
         );
+    }
+    // The writer refuses what the reader would, naming the value, and leaves no file.
+    type Spoil = fn(&mut Splats);
+    let spoiled: [(Spoil, &str); 3] = [
+        (
+            |s| s.means[3 * 17] = f32::NAN,
+            "splats.means[51]: is NaN or infinite",
+        ),
+        (
+            |s| s.sh_rest[9 * 6 + 8] = f32::NEG_INFINITY,
+            "splats.sh_rest[62]: is NaN or infinite",
+        ),
+        (
+            |s| s.rotations[4 * 3..4 * 3 + 4].fill(0.0),
+            "splats.rotations[12..16]: all zero, expected a rotation quaternion",
+        ),
+    ];
+    for (spoil, expect) in spoiled {
+        let mut s = good.clone();
+        spoil(&mut s);
+        let p = d.join("refused.ply");
+        let e = write_splats(&p, &s, None).unwrap_err().to_string();
+        assert!(e.contains("refused.ply") && e.contains(expect), "{e}");
+        assert!(!p.exists());
     }
     // A quaternion that is zero in all but one component is a valid (unnormalised) rotation.
     let mut s = good;

@@ -138,6 +138,26 @@ pub fn write_splats(path: &Path, splats: &Splats, up_axis: Option<&str>) -> Resu
     splats
         .check()
         .map_err(|e| FormatError::invalid(path, "splats", e))?;
+    // The readers (this crate's, and viewers') refuse NaN and infinities, so a file holding
+    // one would be written only to be refused.
+    if let Some((name, i)) = splats.first_non_finite() {
+        return Err(FormatError::invalid(
+            path,
+            format!("splats.{name}[{i}]"),
+            "is NaN or infinite",
+        ));
+    }
+    if let Some(i) = splats
+        .rotations
+        .chunks_exact(4)
+        .position(|q| q.iter().all(|&v| v == 0.0))
+    {
+        return Err(FormatError::invalid(
+            path,
+            format!("splats.rotations[{}..{}]", 4 * i, 4 * i + 4),
+            "all zero, expected a rotation quaternion",
+        ));
+    }
     let k3 = 3 * splats.rest_per_channel();
     let floats = 17 + k3;
     write_atomic(path, |w| {

@@ -673,3 +673,31 @@ fn estimated_focus_replaces_the_mean_distance_start() {
         );
     }
 }
+
+#[test]
+fn a_run_whose_gaussians_leave_f32s_range_stops_and_writes_nothing() {
+    if !gpu_available() {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let scene_dir = ingested(tmp.path());
+    let out = tmp.path().join("trained");
+    let train = stage(cocog_train::stages(), "train");
+    let err = run(
+        train.as_ref(),
+        &scene_dir,
+        &out,
+        json!({"method": "3dgs", "iterations": 60, "downscale": 1, "seed": 3,
+               "position_lr": 1.0, "scene_scale": "3e38"}),
+    )
+    .unwrap_err()
+    .to_string();
+    // Every Gaussian flies past f32's range in the first steps and leaves every render: the
+    // loss stays a number (the background's), the parameters do not.
+    assert!(
+        err.contains("training diverged: after iteration 60, Gaussian 0 of")
+            && err.contains("holds a NaN or infinite value (in its means)"),
+        "{err}"
+    );
+    assert!(!out.join("gaussians.ply").exists());
+}

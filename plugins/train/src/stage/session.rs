@@ -11,7 +11,23 @@ use serde_json::{Value, json};
 use super::Plan;
 use super::log::TrainLog;
 use super::test_eval::{Scores, TestViews};
-use crate::{DROP_DB, DropWatch, PsnrDrop, Reading, Trainer};
+use crate::{DROP_DB, DropWatch, PsnrDrop, Reading, TrainError, Trainer};
+
+/// The error to stop on when reading `r`'s loss is not a number; `last_finite` is the latest
+/// one that was, as (iteration, loss).
+fn diverged(r: &Reading, last_finite: Option<(u32, f64)>) -> Option<TrainError> {
+    if r.loss.is_finite() {
+        return None;
+    }
+    let last = match last_finite {
+        Some((i, l)) => format!("the last finite reading: {l:.5} at iteration {i}"),
+        None => "no earlier reading was finite".to_owned(),
+    };
+    Some(TrainError::Diverged(format!(
+        "the loss is {} at iteration {} ({last})",
+        r.loss, r.iteration
+    )))
+}
 
 /// A run in progress and where its side products go.
 pub(super) struct Session<'c> {
@@ -24,6 +40,8 @@ pub(super) struct Session<'c> {
     log: TrainLog,
     test: Option<TestViews>,
     eval_every: u32,
+    /// The latest reading whose loss was a number: (iteration, loss).
+    last_finite: Option<(u32, f64)>,
 }
 
 /// How the loop ended.
@@ -68,6 +86,7 @@ impl<'c> Session<'c> {
             log,
             test,
             eval_every: plan.eval_every,
+            last_finite: None,
         })
     }
 
@@ -115,6 +134,10 @@ impl<'c> Session<'c> {
             "it_per_s": rate,
         });
         self.log.record(&line)?;
+        if let Some(e) = diverged(r, self.last_finite) {
+            return Err(StageError::other(e));
+        }
+        self.last_finite = Some((it, r.loss));
         if let Some(drop) = watch.observe(it, r.psnr) {
             ctx.warn(&drop_message(&drop));
         }
@@ -274,4 +297,35 @@ fn drop_message(d: &PsnrDrop) -> String {
          density schedule does not suit this scene (see `cocog train --help`, --schedule)",
         d.iteration, d.smoothed, d.best, d.best_iteration
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_loss_that_is_not_a_number_stops_the_run_naming_where() {
+        let reading = |iteration, loss| Reading {
+            iteration,
+            view: 0,
+            num_gaussians: 10,
+            sh_degree: 0,
+            loss,
+            psnr: 20.0,
+        };
+        assert!(diverged(&reading(7, 0.25), None).is_none());
+        let e = diverged(&reading(90, f64::NAN), Some((80, 0.0123))).unwrap();
+        assert_eq!(
+            e.to_string().split("; ").next().unwrap(),
+            "training diverged: the loss is NaN at iteration 90 (the last finite reading: \
+             0.01230 at iteration 80)"
+        );
+        let e = diverged(&reading(10, f64::INFINITY), None)
+            .unwrap()
+            .to_string();
+        assert!(
+            e.contains("the loss is inf at iteration 10 (no earlier reading was finite)"),
+            "{e}"
+        );
+    }
 }
