@@ -44,8 +44,15 @@ impl Stage for Export {
         let stored = scene.gaussians.as_deref().ok_or_else(|| {
             StageError::Input(format!("{}: field `gaussians`: the scene has no trained Gaussians to export (run train first)", req.input.join("scene.json").display()))
         })?;
-        let splats = read_splats(&Scene::resolve(&req.input, stored))
-            .map_err(|e| StageError::Input(e.to_string()))?;
+        let path = Scene::resolve(&req.input, stored);
+        let splats = read_splats(&path).map_err(|e| StageError::Input(e.to_string()))?;
+        // A viewer shows an empty file as a blank scene without saying why.
+        if splats.is_empty() {
+            return Err(StageError::Input(format!(
+                "{}: holds no Gaussians, so there is nothing to export",
+                path.display()
+            )));
+        }
         let result = match format {
             "ply" => write_splats(&req.output, &splats, scene.up.map(axis_name).as_deref()),
             "spz" => write_spz(&req.output, &splats),

@@ -95,3 +95,18 @@ fn a_scene_without_gaussians_is_refused() {
     assert!(!tmp.path().join("o.ply").exists());
     assert_eq!(axis_name([0.0, -0.9, 0.1]), "-y");
 }
+
+#[test]
+fn a_scene_with_no_gaussians_exports_nothing() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("scene");
+    scene_with_gaussians(&dir, true);
+    cocog_formats::ply::write_splats(&dir.join("g.ply"), &Splats::with_capacity(0, 1), None)
+        .unwrap();
+    for format in ["ply", "spz", "glb"] {
+        let out = tmp.path().join(format!("o.{format}"));
+        let err = export(&dir, &out, format).unwrap_err().to_string();
+        assert!(err.contains("g.ply: holds no Gaussians"), "{format}: {err}");
+        assert!(!out.exists());
+    }
+}

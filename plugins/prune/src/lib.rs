@@ -63,6 +63,20 @@ impl Stage for Prune {
         let before = splats.len();
         let keep = keep_mask(&splats, threshold, range);
         retain(&mut splats, &keep);
+        // An empty scene renders black everywhere: refuse it rather than hand it on.
+        if splats.is_empty() {
+            return Err(if before == 0 {
+                StageError::Input(format!(
+                    "{}: holds no Gaussians, so there is nothing to prune",
+                    Scene::resolve(&req.input, &stored).display()
+                ))
+            } else {
+                StageError::Options(format!(
+                    "prune: threshold {threshold} with range {range} would remove all \
+                     {before} Gaussians; choose a smaller threshold"
+                ))
+            });
+        }
         ctx.info(&format!(
             "prune: kept {} of {before} Gaussians",
             splats.len()

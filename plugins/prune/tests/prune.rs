@@ -101,3 +101,50 @@ fn stage_prunes_the_scene_gaussians() {
         .to_string();
     assert!(err.contains("range"), "{err}");
 }
+
+#[test]
+fn pruning_every_gaussian_or_none_at_all_is_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let prune = |s: &Splats, given: serde_json::Value| {
+        let input = tmp.path().join("in");
+        let out = tmp.path().join("out");
+        for d in [&input, &out] {
+            let _ = std::fs::remove_dir_all(d);
+            std::fs::create_dir(d).unwrap();
+        }
+        cocog_formats::ply::write_splats(&input.join("gaussians.ply"), s, None).unwrap();
+        let mut scene = cocog_pipeline::testing::one_view_scene();
+        scene.gaussians = Some("gaussians.ply".into());
+        scene.save(&input).unwrap();
+        let info = Prune.info();
+        let options =
+            Options::validate(&info.name, &info.options, given.as_object().unwrap()).unwrap();
+        let err = Prune
+            .run(
+                &StageRequest {
+                    input,
+                    output: out.clone(),
+                    options,
+                },
+                &NullContext,
+            )
+            .unwrap_err();
+        assert_eq!(
+            std::fs::read_dir(&out).unwrap().count(),
+            0,
+            "nothing written"
+        );
+        err
+    };
+    let faint = splats(&[(0.0, 0.2), (1.0, 0.25)]);
+    let err = prune(&faint, json!({"threshold": 0.9}));
+    assert!(
+        matches!(err, cocog_pipeline::StageError::Options(_))
+            && err
+                .to_string()
+                .contains("threshold 0.9 with range 3 would remove all 2"),
+        "{err}"
+    );
+    let err = prune(&splats(&[]), json!({})).to_string();
+    assert!(err.contains("gaussians.ply: holds no Gaussians"), "{err}");
+}
