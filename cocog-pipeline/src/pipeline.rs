@@ -95,10 +95,21 @@ pub fn run_pipeline(
     // Resolve and validate every stage before running any, so a typo in the last table
     // fails in a second, not after an hour of training.
     let mut steps = Vec::new();
+    // Whether the scene a stage reads may hold Gaussians: not straight out of an ingest.
+    // Export, render and eval need them; convert writes only cameras and photos.
+    let mut may_have_gaussians = true;
     for (i, name) in header.stages.iter().enumerate() {
         let entry = registry.resolve(name)?;
         let last = i + 1 == header.stages.len();
         let kind = entry.info.kind;
+        // Found now rather than when the stage starts, which may be after a training.
+        if kind == StageKind::Ingest && i > 0 {
+            return Err(bad(format!(
+                "stage '{name}' reads a dataset, but it follows '{}', which writes a scene; \
+                 an ingest stage can only come first",
+                header.stages[i - 1]
+            )));
+        }
         if !last
             && !matches!(
                 kind,
@@ -109,6 +120,19 @@ pub fn run_pipeline(
                 "stage '{name}' ({kind:?}) does not write a scene, so no stage can follow it; \
                  put it last, or run it separately on an intermediate scene in {}",
                 work.display()
+            )));
+        }
+        if kind == StageKind::Ingest {
+            may_have_gaussians = false;
+        } else if matches!(kind, StageKind::Train | StageKind::Transform) {
+            // A transform may be a plugin that makes Gaussians.
+            may_have_gaussians = true;
+        } else if kind != StageKind::Convert && !may_have_gaussians {
+            return Err(bad(format!(
+                "stage '{name}' ({}) needs trained Gaussians, but it reads the scene '{}' \
+                 ingests, which has none; put train before it",
+                kind.as_str(),
+                header.stages[i - 1]
             )));
         }
         let mut options = match doc.get(name.as_str()) {

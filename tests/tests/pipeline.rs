@@ -128,6 +128,20 @@ fn pipeline_mistakes_fail_before_any_stage_runs() {
         2,
         &["'format': expected ply, glb or spz, got \"obj\""],
     );
+    // Stages whose input no earlier stage can give.
+    refused(
+        &format!("{head}stages = [\"ingest-colmap\", \"train\", \"ingest-llff\"]\n"),
+        2,
+        &["'ingest-llff' reads a dataset, but it follows 'train'"],
+    );
+    refused(
+        &format!("{head}stages = [\"ingest-colmap\", \"export\"]\n"),
+        2,
+        &[
+            "'export' (export) needs trained Gaussians",
+            "'ingest-colmap' ingests",
+        ],
+    );
     refused("[pipeline]\ninput = 3\n", 2, &["p.toml"]);
     assert_eq!(listing(work.path()), vec!["dataset", "p.toml"]);
 }
