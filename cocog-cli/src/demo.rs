@@ -292,9 +292,8 @@ fn focus_pull(
         json!({ "split": "test", "views": first_test_view(dataset)?, "focus_sweep": sweep, "aperture": 2.0 }),
     );
     let entry = registry.resolve("render")?;
-    let work = tempfile::Builder::new()
-        .prefix(".cocog-demo-pull-")
-        .tempdir_in(gif.parent().unwrap_or(Path::new(".")))?;
+    cocog_pipeline::atomic::remove_stale_temps(gif);
+    let work = cocog_pipeline::atomic::scratch_beside(&cocog_pipeline::atomic::sibling_temp(gif))?;
     let frames = work.path().join("frames");
     run_stage(entry, scene, &frames, &options, false, ctx)?;
     crate::sweep::write_gif(&crate::sweep::frame_files(&frames)?, gif)

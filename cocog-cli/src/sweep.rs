@@ -70,14 +70,13 @@ pub fn run(
             }
         );
     }
-    let parent = match output.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    let work = tempfile::Builder::new()
-        .prefix(".cocog-sweep-")
-        .tempdir_in(&parent)
-        .with_context(|| format!("{}: cannot make a work folder", parent.display()))?;
+    // Named as the runner's staging, so a killed run's folder goes with the next run's.
+    cocog_pipeline::atomic::remove_stale_temps(output);
+    let work =
+        cocog_pipeline::atomic::scratch_beside(&cocog_pipeline::atomic::sibling_temp(output))
+            .with_context(|| {
+                format!("{}: cannot make a work folder beside it", output.display())
+            })?;
     let frames_dir = work.path().join("frames");
     let mut summary = run_stage(entry, &a.io.scene, &frames_dir, &options, false, ctx)?;
     let frames = frame_files(&frames_dir)?;

@@ -51,6 +51,26 @@ pub fn remove_stale_temps(target: &Path) {
     }
 }
 
+/// A scratch folder beside `output`, removed when dropped. Its name extends `output`'s, so
+/// when `output` is a stage's staging path (`sibling_temp`) and the process is killed before
+/// the drop, the next run's `remove_stale_temps` of the same target removes it too.
+pub fn scratch_beside(output: &Path) -> io::Result<tempfile::TempDir> {
+    let name = output
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "output".to_owned());
+    let parent = output
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or_else(|| Path::new("."));
+    let prefix = if name.starts_with('.') {
+        format!("{name}-scratch-")
+    } else {
+        format!(".{name}-scratch-")
+    };
+    tempfile::Builder::new().prefix(&prefix).tempdir_in(parent)
+}
+
 fn process_is_gone(pid: u32) -> bool {
     cfg!(target_os = "linux")
         && Path::new("/proc/self").exists()
@@ -174,6 +194,24 @@ mod tests {
         remove_stale_temps(&target);
         assert!(!dead.exists());
         assert!(live.exists() && other.exists());
+    }
+
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn scratch_beside_a_dead_runs_staging_goes_with_its_stale_temps() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let target = dir.path().join("eval.json");
+        let dead_staging = dir.path().join(".eval.json.cocog-tmp-4194305-3");
+        let scratch = scratch_beside(&dead_staging).expect("scratch");
+        fs::write(scratch.path().join("x"), b"1").expect("write");
+        // As if the process had been killed: the folder outlives its TempDir.
+        let kept = scratch.keep();
+        let live = scratch_beside(&sibling_temp(&target)).expect("scratch");
+        remove_stale_temps(&target);
+        assert!(!kept.exists(), "{}", kept.display());
+        assert!(live.path().exists());
+        drop(live);
+        assert_eq!(fs::read_dir(dir.path()).expect("read_dir").count(), 0);
     }
 
     #[test]

@@ -100,12 +100,10 @@ impl Stage for EvalScene {
             camera_file: None,
         };
         let opts = eval_options(req)?;
-        // Beside the output, so the renders sit on the same disk and vanish with the stage.
-        let parent = req.output.parent().unwrap_or_else(|| Path::new("."));
-        let work = tempfile::Builder::new()
-            .prefix(".cocog-eval-scene-")
-            .tempdir_in(parent)
-            .map_err(|e| StageError::io(parent, e))?;
+        // Beside the output, so the renders sit on the same disk and vanish with the stage
+        // (or, after a kill, with the next run's stale temporaries).
+        let work = cocog_pipeline::atomic::scratch_beside(&req.output)
+            .map_err(|e| StageError::io(&req.output, e))?;
         let (pred, gt) = (work.path().join("renders"), work.path().join("gt"));
         for dir in [&pred, &gt] {
             std::fs::create_dir(dir).map_err(|e| StageError::io(dir, e))?;
