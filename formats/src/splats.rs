@@ -54,6 +54,45 @@ impl Splats {
         sh_rest_per_channel(self.sh_degree)
     }
 
+    /// Keeps the splats whose `keep` entry is true, in order.
+    pub fn retain(&mut self, keep: &[bool]) {
+        fn filter(v: &mut Vec<f32>, width: usize, keep: &[bool]) {
+            let mut out = 0;
+            for (i, k) in keep.iter().enumerate() {
+                if *k {
+                    v.copy_within(i * width..(i + 1) * width, out * width);
+                    out += 1;
+                }
+            }
+            v.truncate(out * width);
+        }
+        let k3 = 3 * self.rest_per_channel();
+        filter(&mut self.means, 3, keep);
+        filter(&mut self.log_scales, 3, keep);
+        filter(&mut self.rotations, 4, keep);
+        filter(&mut self.opacities, 1, keep);
+        filter(&mut self.sh_dc, 3, keep);
+        if k3 > 0 {
+            filter(&mut self.sh_rest, k3, keep);
+        }
+    }
+
+    /// Whether each splat's values are all finite.
+    pub fn finite_mask(&self) -> Vec<bool> {
+        let k3 = 3 * self.rest_per_channel();
+        let ok = |v: &[f32]| v.iter().all(|x| x.is_finite());
+        (0..self.len())
+            .map(|i| {
+                ok(&self.means[3 * i..3 * i + 3])
+                    && ok(&self.log_scales[3 * i..3 * i + 3])
+                    && ok(&self.rotations[4 * i..4 * i + 4])
+                    && self.opacities[i].is_finite()
+                    && ok(&self.sh_dc[3 * i..3 * i + 3])
+                    && ok(&self.sh_rest[k3 * i..k3 * (i + 1)])
+            })
+            .collect()
+    }
+
     /// The first NaN or infinite value as (field, flat index), for writers whose format
     /// cannot hold one.
     pub fn first_non_finite(&self) -> Option<(&'static str, usize)> {

@@ -1,4 +1,4 @@
-//! The pruning rule and an in-place filter over the structure-of-arrays splats.
+//! The depth-weighted pruning rule (the filter itself is `Splats::retain`).
 
 use cocog_formats::splats::{Splats, sigmoid};
 
@@ -26,27 +26,4 @@ pub fn keep_mask(s: &Splats, threshold: f64, range: f64) -> Vec<bool> {
             f64::from(sigmoid(*o)) >= threshold / w
         })
         .collect()
-}
-
-/// Keeps the Gaussians whose `keep` entry is true, in order.
-pub fn retain(s: &mut Splats, keep: &[bool]) {
-    fn filter(v: &mut Vec<f32>, width: usize, keep: &[bool]) {
-        let mut out = 0;
-        for (i, k) in keep.iter().enumerate() {
-            if *k {
-                v.copy_within(i * width..(i + 1) * width, out * width);
-                out += 1;
-            }
-        }
-        v.truncate(out * width);
-    }
-    let k3 = 3 * s.rest_per_channel();
-    filter(&mut s.means, 3, keep);
-    filter(&mut s.log_scales, 3, keep);
-    filter(&mut s.rotations, 4, keep);
-    filter(&mut s.opacities, 1, keep);
-    filter(&mut s.sh_dc, 3, keep);
-    if k3 > 0 {
-        filter(&mut s.sh_rest, k3, keep);
-    }
 }

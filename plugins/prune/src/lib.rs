@@ -13,7 +13,7 @@ use cocog_pipeline::{
 };
 use serde_json::{Value, json};
 
-pub use depth_prune::{keep_mask, retain};
+pub use depth_prune::keep_mask;
 
 pub struct Prune;
 
@@ -62,7 +62,7 @@ impl Stage for Prune {
             .map_err(|e| StageError::Input(e.to_string()))?;
         let before = splats.len();
         let keep = keep_mask(&splats, threshold, range);
-        retain(&mut splats, &keep);
+        splats.retain(&keep);
         // An empty scene renders black everywhere: refuse it rather than hand it on.
         if splats.is_empty() {
             return Err(if before == 0 {

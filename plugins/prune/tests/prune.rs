@@ -2,7 +2,7 @@
 
 use cocog_formats::splats::{Splats, logit};
 use cocog_pipeline::{NullContext, Options, Scene, Stage, StageRequest};
-use cocog_prune::{Prune, keep_mask, retain};
+use cocog_prune::{Prune, keep_mask};
 use serde_json::json;
 
 /// Gaussians at z = 0, 1, 2 (weights 1, 2, 3 with range 3) with chosen opacities.
@@ -40,7 +40,7 @@ fn threshold_relaxes_with_height() {
         [false, true, false, false, false, false]
     );
     let mut t = s.clone();
-    retain(&mut t, &[false, true, false, true, false, true]);
+    t.retain(&[false, true, false, true, false, true]);
     assert_eq!(t.len(), 3);
     assert!(t.check().is_ok());
     assert_eq!(t.sh_dc, [1.0, 1.0, 1.0, 3.0, 3.0, 3.0, 5.0, 5.0, 5.0]);

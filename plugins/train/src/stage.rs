@@ -1,5 +1,6 @@
 //! The `train` pipeline stage: scene + points.ply in, scene + gaussians.ply out.
 
+mod finite;
 pub(crate) mod load;
 mod log;
 mod schedule;
@@ -17,7 +18,7 @@ use serde_json::{Value, json};
 
 use cocog_engine::coc::CocVariant;
 
-use crate::{CocCheckpoint, CocTrainConfig, TrainConfig, TrainError, TrainState, Trainer};
+use crate::{CocCheckpoint, CocTrainConfig, TrainConfig, TrainState, Trainer};
 use schedule::Schedule;
 use test_eval::TestViews;
 
@@ -542,24 +543,8 @@ impl Stage for Train {
         }
 
         let gaussians = session.trainer.gaussians().map_err(StageError::other)?;
-        let splats: cocog_formats::Splats = (&gaussians).into();
-        // Gaussians pushed past f32's range vanish from every render, so the loss can stay a
-        // number while they become infinite.
-        if let Some((field, i)) = splats.first_non_finite() {
-            let per = match field {
-                "rotations" => 4,
-                "opacities" => 1,
-                "sh_rest" => 3 * splats.rest_per_channel(),
-                _ => 3,
-            };
-            return Err(StageError::other(TrainError::Diverged(format!(
-                "after iteration {}, Gaussian {} of {} holds a NaN or infinite value (in its \
-                 {field})",
-                plan.config.iterations,
-                i / per,
-                splats.len()
-            ))));
-        }
+        let mut splats: cocog_formats::Splats = (&gaussians).into();
+        finite::keep_finite(&mut splats, plan.config.iterations, ctx)?;
         let ply = req.output.join("gaussians.ply");
         cocog_formats::ply::write_splats(&ply, &splats, None).map_err(StageError::other)?;
         let focus = session
