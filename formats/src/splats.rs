@@ -108,6 +108,22 @@ impl Splats {
         .find_map(|(name, v)| v.iter().position(|x| !x.is_finite()).map(|i| (name, i)))
     }
 
+    /// What every writer checks first: consistent lengths, and no NaN or infinity, which no
+    /// reader (this crate's, or a viewer's) accepts.
+    pub(crate) fn check_writable(&self, path: &std::path::Path) -> crate::error::Result<()> {
+        use crate::error::FormatError;
+        self.check()
+            .map_err(|e| FormatError::invalid(path, "splats", e))?;
+        if let Some((name, i)) = self.first_non_finite() {
+            return Err(FormatError::invalid(
+                path,
+                format!("splats.{name}[{i}]"),
+                "is NaN or infinite",
+            ));
+        }
+        Ok(())
+    }
+
     /// Checks that every vector has the length `len()` implies, or says which one does not.
     pub fn check(&self) -> Result<(), String> {
         if self.sh_degree > 3 {

@@ -35,17 +35,8 @@ const SH_REST_BITS: u32 = 4;
 
 /// Writes `splats` to `path` as SPZ version 3 (through a temp file, renamed into place).
 pub fn write_spz(path: &Path, splats: &Splats) -> Result<()> {
-    splats
-        .check()
-        .map_err(|e| FormatError::invalid(path, "splats", e))?;
+    splats.check_writable(path)?;
     let limit = f64::from((1u32 << 23) - 1) / f64::from(1u32 << FRACTIONAL_BITS);
-    if let Some((name, i)) = splats.first_non_finite() {
-        return Err(FormatError::invalid(
-            path,
-            format!("splats.{name}[{i}]"),
-            "is NaN or infinite",
-        ));
-    }
     if let Some(i) = splats.means.iter().position(|x| f64::from(x.abs()) > limit) {
         return Err(FormatError::invalid(
             path,

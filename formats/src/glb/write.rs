@@ -56,21 +56,12 @@ impl Builder {
 /// Writes `splats` as a `.glb` with `KHR_gaussian_splatting`, atomically. Non-finite values are
 /// refused: glTF accessors must not hold NaN.
 pub fn write_glb(path: &Path, splats: &Splats) -> Result<()> {
-    splats
-        .check()
-        .map_err(|e| FormatError::invalid(path, "splats", e))?;
+    splats.check_writable(path)?;
     if splats.is_empty() {
         return Err(FormatError::invalid(
             path,
             "splats",
             "no splats to write (glTF accessors need count ≥ 1)",
-        ));
-    }
-    if let Some((name, i)) = splats.first_non_finite() {
-        return Err(FormatError::invalid(
-            path,
-            format!("splats.{name}[{i}]"),
-            "is NaN or infinite",
         ));
     }
     let mut s = splats.clone();

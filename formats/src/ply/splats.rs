@@ -135,18 +135,7 @@ fn header(splats: &Splats, up_axis: Option<&str>) -> String {
 /// Writes `splats` as a binary little-endian INRIA 3DGS PLY (normals written as zero), atomically.
 /// `up_axis` (e.g. `"y"` or `"-z"`) is recorded in a header comment when given.
 pub fn write_splats(path: &Path, splats: &Splats, up_axis: Option<&str>) -> Result<()> {
-    splats
-        .check()
-        .map_err(|e| FormatError::invalid(path, "splats", e))?;
-    // The readers (this crate's, and viewers') refuse NaN and infinities, so a file holding
-    // one would be written only to be refused.
-    if let Some((name, i)) = splats.first_non_finite() {
-        return Err(FormatError::invalid(
-            path,
-            format!("splats.{name}[{i}]"),
-            "is NaN or infinite",
-        ));
-    }
+    splats.check_writable(path)?;
     if let Some(i) = splats
         .rotations
         .chunks_exact(4)
