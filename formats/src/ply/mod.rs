@@ -162,11 +162,19 @@ fn read_error(
 fn is_ascii(path: &Path) -> bool {
     let mut head = Vec::new();
     let read = File::open(path).and_then(|f| f.take(1 << 16).read_to_end(&mut head));
+    // Decide as serde-ply does: the last `format` line of the header wins.
     read.is_ok()
         && head
             .split(|&b| b == b'\n')
-            .take_while(|line| !line.starts_with(b"end_header"))
-            .any(|line| line.starts_with(b"format ascii"))
+            .take_while(|line| line.trim_ascii() != b"end_header")
+            .filter_map(|line| {
+                let mut words = line
+                    .split(u8::is_ascii_whitespace)
+                    .filter(|w| !w.is_empty());
+                (words.next() == Some(b"format")).then(|| words.next())
+            })
+            .last()
+            .is_some_and(|kind| kind == Some(b"ascii".as_slice()))
 }
 
 /// Opens a PLY file, parses its header and positions the reader at the `vertex` element.
@@ -226,7 +234,8 @@ pub(crate) fn open_at_vertex(path: &Path) -> Result<Opened> {
         let mut offset = u128::from(header_len);
         for (element, &row) in header.elem_defs.iter().zip(&sizes) {
             let need = element.count as u128 * u128::from(row);
-            let left = u128::from(file_len) - offset;
+            // The ascii newline appended above can put the header's end past the file's.
+            let left = u128::from(file_len).saturating_sub(offset);
             if need > left {
                 return Err(FormatError::invalid(
                     path,
@@ -241,7 +250,7 @@ pub(crate) fn open_at_vertex(path: &Path) -> Result<Opened> {
             }
             offset += need;
         }
-        let extra = u128::from(file_len) - offset;
+        let extra = u128::from(file_len).saturating_sub(offset);
         if let (Some(last), Some(&row)) = (header.elem_defs.last(), sizes.last())
             && extra >= u128::from(row.max(1))
         {
