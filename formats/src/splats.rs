@@ -55,7 +55,17 @@ impl Splats {
     }
 
     /// Keeps the splats whose `keep` entry is true, in order.
+    ///
+    /// # Panics
+    /// If `keep` does not hold one entry per splat: a mask made for other splats.
     pub fn retain(&mut self, keep: &[bool]) {
+        assert_eq!(
+            keep.len(),
+            self.len(),
+            "Splats::retain: a mask of {} for {} splats",
+            keep.len(),
+            self.len()
+        );
         fn filter(v: &mut Vec<f32>, width: usize, keep: &[bool]) {
             let mut out = 0;
             for (i, k) in keep.iter().enumerate() {
@@ -77,8 +87,9 @@ impl Splats {
         }
     }
 
-    /// Whether each splat's values are all finite.
-    pub fn finite_mask(&self) -> Vec<bool> {
+    /// Whether each splat is one every writer and reader accepts: all values finite, and a
+    /// rotation that is not all zero.
+    pub fn writable_mask(&self) -> Vec<bool> {
         let k3 = 3 * self.rest_per_channel();
         let ok = |v: &[f32]| v.iter().all(|x| x.is_finite());
         (0..self.len())
@@ -86,6 +97,7 @@ impl Splats {
                 ok(&self.means[3 * i..3 * i + 3])
                     && ok(&self.log_scales[3 * i..3 * i + 3])
                     && ok(&self.rotations[4 * i..4 * i + 4])
+                    && self.rotations[4 * i..4 * i + 4].iter().any(|&q| q != 0.0)
                     && self.opacities[i].is_finite()
                     && ok(&self.sh_dc[3 * i..3 * i + 3])
                     && ok(&self.sh_rest[k3 * i..k3 * (i + 1)])

@@ -11,10 +11,10 @@ pub enum TrainError {
     /// A failed step lost the GPU parameters (Batch::new consumes them); the run cannot go on.
     #[error("a previous step failed and left the trainer without parameters")]
     Poisoned,
-    /// The loss or the parameters stopped being numbers (the message says which, and
-    /// where): going on would only write a model no reader accepts.
+    /// The loss or the parameters stopped being numbers: going on would only write a model no
+    /// reader accepts. The message says which, where, and what the run left on disk.
     #[error(
-        "training diverged: {0}; nothing was written. A learning rate too large for the \
+        "training diverged: {0}. A learning rate too large for the \
          scene's scale is the usual cause: compare the scene scale printed at the start with \
          the scene's size, and try a smaller --position-lr or --scene-scale"
     )]

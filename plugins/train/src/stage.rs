@@ -445,6 +445,7 @@ impl Stage for Train {
             name: "train".to_owned(),
             kind: StageKind::Train,
             output: OutputKind::Dir,
+            needs_gaussians: false,
             description: "Optimise 3D Gaussians from the scene's points and train views; \
                           writes gaussians.ply, checkpoint/ and train-log.jsonl"
                 .to_owned(),
@@ -544,7 +545,9 @@ impl Stage for Train {
 
         let gaussians = session.trainer.gaussians().map_err(StageError::other)?;
         let mut splats: cocog_formats::Splats = (&gaussians).into();
-        finite::keep_finite(&mut splats, plan.config.iterations, ctx)?;
+        finite::keep_finite(&mut splats, plan.config.iterations, ctx, |what| {
+            session.diverged_error(what)
+        })?;
         let ply = req.output.join("gaussians.ply");
         cocog_formats::ply::write_splats(&ply, &splats, None).map_err(StageError::other)?;
         let focus = session
@@ -575,7 +578,7 @@ impl Stage for Train {
             "iterations": plan.config.iterations,
             "resumed_from": start,
             "checkpoint_superseded": true,
-            "gaussians": gaussians.len(),
+            "gaussians": splats.len(),
             "final_loss": outcome.final_loss,
             "final_psnr": outcome.final_psnr,
             "seconds": outcome.seconds,

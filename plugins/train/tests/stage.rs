@@ -696,8 +696,32 @@ fn a_run_whose_gaussians_leave_f32s_range_stops_and_writes_nothing() {
     // loss stays a number (the background's), the parameters do not.
     assert!(
         err.contains("training diverged: after iteration 60,")
-            && err.contains("Gaussians hold NaN or infinite values (the first: Gaussian 0)"),
+            && err.contains(
+                "Gaussians hold NaN or infinite values or an all-zero rotation (the first: \
+                 Gaussian 0); nothing was written"
+            ),
         "{err}"
     );
     assert!(!out.join("gaussians.ply").exists());
+
+    // A checkpoint kept beside the output stays, and the error says so: it may already hold
+    // the values that broke the run.
+    let checkpoint = tmp.path().join("trained.checkpoint");
+    let err = run(
+        train.as_ref(),
+        &scene_dir,
+        &out,
+        json!({"method": "3dgs", "iterations": 60, "downscale": 1, "seed": 3,
+               "position_lr": 1.0, "scene_scale": "3e38",
+               "checkpoint_dir": checkpoint, "checkpoint_every": 25}),
+    )
+    .unwrap_err()
+    .to_string();
+    let kept = format!(
+        "the output was not written, but the checkpoint {} (saved at iteration 50; it may \
+         already hold the bad values) stay",
+        checkpoint.display()
+    );
+    assert!(err.contains(&kept), "{err}");
+    assert!(checkpoint.is_dir() && !out.join("gaussians.ply").exists());
 }

@@ -13,9 +13,9 @@ use super::log::TrainLog;
 use super::test_eval::{Scores, TestViews};
 use crate::{DROP_DB, DropWatch, PsnrDrop, Reading, TrainError, Trainer};
 
-/// The error to stop on when reading `r`'s loss is not a number; `last_finite` is the latest
-/// one that was, as (iteration, loss).
-fn diverged(r: &Reading, last_finite: Option<(u32, f64)>) -> Option<TrainError> {
+/// What is wrong when reading `r`'s loss is not a number; `last_finite` is the latest one
+/// that was, as (iteration, loss).
+fn diverged(r: &Reading, last_finite: Option<(u32, f64)>) -> Option<String> {
     if r.loss.is_finite() {
         return None;
     }
@@ -23,10 +23,10 @@ fn diverged(r: &Reading, last_finite: Option<(u32, f64)>) -> Option<TrainError> 
         Some((i, l)) => format!("the last finite reading: {l:.5} at iteration {i}"),
         None => "no earlier reading was finite".to_owned(),
     };
-    Some(TrainError::Diverged(format!(
+    Some(format!(
         "the loss is {} at iteration {} ({last})",
         r.loss, r.iteration
-    )))
+    ))
 }
 
 /// A run in progress and where its side products go.
@@ -42,6 +42,8 @@ pub(super) struct Session<'c> {
     eval_every: u32,
     /// The latest reading whose loss was a number: (iteration, loss).
     last_finite: Option<(u32, f64)>,
+    /// The iteration of the last checkpoint this run saved.
+    saved_at: Option<u32>,
 }
 
 /// How the loop ended.
@@ -87,6 +89,7 @@ impl<'c> Session<'c> {
             test,
             eval_every: plan.eval_every,
             last_finite: None,
+            saved_at: None,
         })
     }
 
@@ -134,8 +137,8 @@ impl<'c> Session<'c> {
             "it_per_s": rate,
         });
         self.log.record(&line)?;
-        if let Some(e) = diverged(r, self.last_finite) {
-            return Err(StageError::other(e));
+        if let Some(what) = diverged(r, self.last_finite) {
+            return Err(self.diverged_error(what));
         }
         self.last_finite = Some((it, r.loss));
         if let Some(drop) = watch.observe(it, r.psnr) {
@@ -231,9 +234,38 @@ impl<'c> Session<'c> {
         Ok(outcome)
     }
 
+    /// Training diverged (`what` says how): the output is not written, but a checkpoint and
+    /// a live log kept beside it stay, and the error names them, as the checkpoint may already
+    /// hold the bad values a resume would start from.
+    pub fn diverged_error(&self, what: String) -> StageError {
+        let mut left = Vec::new();
+        if let Some(dir) = self.checkpoint_dir.as_ref().filter(|d| d.exists()) {
+            let when = match self.saved_at {
+                Some(i) => format!("saved at iteration {i}"),
+                None => "from before this run".to_owned(),
+            };
+            left.push(format!(
+                "the checkpoint {} ({when}; it may already hold the bad values)",
+                dir.display()
+            ));
+        }
+        if self.log.is_live() {
+            left.push(format!("the log {}", self.log.path().display()));
+        }
+        let left = if left.is_empty() {
+            "; nothing was written".to_owned()
+        } else {
+            format!(
+                "; the output was not written, but {} stay",
+                left.join(" and ")
+            )
+        };
+        StageError::other(TrainError::Diverged(format!("{what}{left}")))
+    }
+
     /// Replaces `dir` with the current state, atomically: an interruption while writing
     /// leaves the previous checkpoint.
-    fn save(&self, dir: &Path) -> Result<(), StageError> {
+    fn save(&mut self, dir: &Path) -> Result<(), StageError> {
         let state = self
             .trainer
             .snapshot(self.downscale)
@@ -242,7 +274,9 @@ impl<'c> Session<'c> {
         state.save(staging.path()).map_err(StageError::other)?;
         staging
             .commit(dir, true)
-            .map_err(|e| StageError::io(dir, e))
+            .map_err(|e| StageError::io(dir, e))?;
+        self.saved_at = Some(self.trainer.iteration());
+        Ok(())
     }
 
     /// The log into the output (see `TrainLog::finish`).
@@ -250,14 +284,14 @@ impl<'c> Session<'c> {
         self.log.finish(output)
     }
 
-    fn save_on_interrupt(&self, ctx: &dyn Context) -> Result<(), StageError> {
-        let Some(dir) = &self.checkpoint_dir else {
+    fn save_on_interrupt(&mut self, ctx: &dyn Context) -> Result<(), StageError> {
+        let Some(dir) = self.checkpoint_dir.clone() else {
             return Ok(());
         };
         if self.trainer.iteration() == 0 {
             return Ok(());
         }
-        self.save(dir)?;
+        self.save(&dir)?;
         // A log inside the output goes with the discarded staging folder; a live one stays.
         let log = if self.log.is_live() {
             format!(
@@ -316,13 +350,10 @@ mod tests {
         assert!(diverged(&reading(7, 0.25), None).is_none());
         let e = diverged(&reading(90, f64::NAN), Some((80, 0.0123))).unwrap();
         assert_eq!(
-            e.to_string().split("; ").next().unwrap(),
-            "training diverged: the loss is NaN at iteration 90 (the last finite reading: \
-             0.01230 at iteration 80)"
+            e,
+            "the loss is NaN at iteration 90 (the last finite reading: 0.01230 at iteration 80)"
         );
-        let e = diverged(&reading(10, f64::INFINITY), None)
-            .unwrap()
-            .to_string();
+        let e = diverged(&reading(10, f64::INFINITY), None).unwrap();
         assert!(
             e.contains("the loss is inf at iteration 10 (no earlier reading was finite)"),
             "{e}"
