@@ -696,8 +696,9 @@ pub struct StageArgs {
   format = \"ply\"
 The last stage writes OUTPUT, the others OUTPUT.stages/NN-STAGE. Every stage's option names,
 types, ranges and choices are checked before the first stage runs (`cocog plugins --json`
-lists them), and so is the order: ingest first; export, render, eval or convert last; export,
-render and eval not straight after an ingest, whose scene has no Gaussians. Values that depend
+lists them), and so is the order: ingest first; export, render, eval or convert last; no
+stage that reads Gaussians (prune, export, render, eval-scene) after an ingest without a train
+(or a plugin stage) between, as an ingest's scene has none. Values that depend
 on the input (a blur start past the run's end) are checked when their stage starts.")]
 pub struct RunArgs {
     /// The pipeline file (TOML): [pipeline] input, output, stages, plus one table of

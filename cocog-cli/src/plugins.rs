@@ -23,6 +23,7 @@ pub fn list(registry: &Registry, as_json: bool, verbose: bool) -> Result<()> {
         rows.push(json!({
             "stage": entry.info.name,
             "kind": entry.info.kind.as_str(),
+            "needs_gaussians": entry.info.needs_gaussians,
             "provider": provider,
             "version": version,
             "file": file,

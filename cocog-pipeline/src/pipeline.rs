@@ -7,7 +7,7 @@ use serde_json::{Map, Value, json};
 
 use crate::context::Context;
 use crate::options::Options;
-use crate::registry::{Registry, StageEntry};
+use crate::registry::{Provider, Registry, StageEntry};
 use crate::runner::{RunError, RunHow, run_stage_with};
 use crate::scene::Scene;
 use crate::stage::{OutputKind, StageKind};
@@ -95,9 +95,9 @@ pub fn run_pipeline(
     // Resolve and validate every stage before running any, so a typo in the last table
     // fails in a second, not after an hour of training.
     let mut steps = Vec::new();
-    // Whether the scene a stage reads may hold Gaussians: not straight out of an ingest.
-    // Export, render and eval need them; convert writes only cameras and photos.
-    let mut may_have_gaussians = true;
+    // The built-in ingest whose scene (no Gaussians) the next stage reads, if any. Only
+    // built-in ingests are known to write none: a plugin's may import a trained model.
+    let mut gaussian_free: Option<&str> = None;
     for (i, name) in header.stages.iter().enumerate() {
         let entry = registry.resolve(name)?;
         let last = i + 1 == header.stages.len();
@@ -122,18 +122,19 @@ pub fn run_pipeline(
                 work.display()
             )));
         }
-        if kind == StageKind::Ingest {
-            may_have_gaussians = false;
-        } else if matches!(kind, StageKind::Train | StageKind::Transform) {
-            // A transform may be a plugin that makes Gaussians.
-            may_have_gaussians = true;
-        } else if kind != StageKind::Convert && !may_have_gaussians {
+        if let Some(ingest) = gaussian_free.filter(|_| entry.info.needs_gaussians) {
             return Err(bad(format!(
-                "stage '{name}' ({}) needs trained Gaussians, but it reads the scene '{}' \
-                 ingests, which has none; put train before it",
+                "stage '{name}' ({}) needs trained Gaussians, but no stage since '{ingest}' \
+                 makes any (an ingest writes cameras and points only); put train before it",
                 kind.as_str(),
-                header.stages[i - 1]
             )));
+        }
+        let built_in = entry.provider == Provider::BuiltIn;
+        if kind == StageKind::Ingest && built_in {
+            gaussian_free = Some(name);
+        } else if kind == StageKind::Train || !built_in {
+            // A plugin may make Gaussians, whatever its kind.
+            gaussian_free = None;
         }
         let mut options = match doc.get(name.as_str()) {
             Some(toml::Value::Table(t)) => {

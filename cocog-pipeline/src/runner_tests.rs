@@ -21,6 +21,7 @@ impl Stage for Resolving {
             name: "resolving".into(),
             kind: StageKind::Transform,
             output: OutputKind::Dir,
+            needs_gaussians: false,
             description: "test stage".into(),
             options: vec![OptionSpec::int("k", 3, "a constant")],
         }
@@ -89,6 +90,7 @@ impl Stage for Checkpointing {
             name: "checkpointing".into(),
             kind: StageKind::Train,
             output: OutputKind::Dir,
+            needs_gaussians: false,
             description: "test stage".into(),
             options: vec![
                 OptionSpec::optional("checkpoint_dir", crate::OptionKind::Path, "where"),
@@ -140,6 +142,7 @@ impl Stage for Rebasing {
             name: "rebasing".into(),
             kind: StageKind::Transform,
             output: OutputKind::Dir,
+            needs_gaussians: false,
             description: "test stage".into(),
             options: vec![],
         }

@@ -52,6 +52,11 @@ pub struct StageInfo {
     pub name: String,
     pub kind: StageKind,
     pub output: OutputKind,
+    /// Whether the stage reads the input scene's Gaussians: a pipeline refuses to run it on
+    /// the scene a built-in ingest wrote, which has none. False when absent from a plugin's
+    /// descriptor, so plugins built before the field are never refused by it.
+    #[serde(default)]
+    pub needs_gaussians: bool,
     pub description: String,
     #[serde(default)]
     pub options: Vec<OptionSpec>,

@@ -108,7 +108,7 @@ fn pipeline_mistakes_fail_before_any_stage_runs() {
     // An option typo, or a value JSON cannot carry, in a later stage's table.
     refused(
         &format!(
-            "{head}stages = [\"ingest-colmap\", \"densify\", \"export\"]\n[export]\nformt = \"glb\"\n"
+            "{head}stages = [\"ingest-colmap\", \"train\", \"export\"]\n[export]\nformt = \"glb\"\n"
         ),
         2,
         &["no option 'formt'"],
@@ -123,7 +123,7 @@ fn pipeline_mistakes_fail_before_any_stage_runs() {
     // A value the last stage refuses stops the run before the first stage, not after it.
     refused(
         &format!(
-            "{head}stages = [\"ingest-colmap\", \"densify\", \"export\"]\n[export]\nformat = \"obj\"\n"
+            "{head}stages = [\"ingest-colmap\", \"train\", \"export\"]\n[export]\nformat = \"obj\"\n"
         ),
         2,
         &["'format': expected ply, glb or spz, got \"obj\""],
@@ -139,9 +139,34 @@ fn pipeline_mistakes_fail_before_any_stage_runs() {
         2,
         &[
             "'export' (export) needs trained Gaussians",
-            "'ingest-colmap' ingests",
+            "no stage since 'ingest-colmap' makes any",
         ],
     );
+    // Densify adds points, not Gaussians.
+    refused(
+        &format!("{head}stages = [\"ingest-colmap\", \"densify\", \"render\"]\n"),
+        2,
+        &["'render' (render) needs trained Gaussians"],
+    );
+    // `eval` scores two folders of images and reads no Gaussians, and a plugin stage may make
+    // them whatever its kind: neither is refused by the order check, so the run starts and
+    // its first stage meets the empty dataset.
+    let lib = cdylib("cocog-plugin-recenter");
+    for (stages, extra) in [
+        ("\"ingest-colmap\", \"eval\"", "[eval]\ngt = \"gt\"\n"),
+        ("\"ingest-colmap\", \"recenter\", \"export\"", ""),
+    ] {
+        std::fs::write(&pipeline, format!("{head}stages = [{stages}]\n{extra}")).expect("write");
+        let out = cocog(&["run", path_str(&pipeline), "--plugin-path", path_str(&lib)]);
+        let err = stderr(&out);
+        assert!(
+            !out.status.success()
+                && !err.contains("needs trained Gaussians")
+                && err.contains("stage 'ingest-colmap'"),
+            "{stages}: {err}"
+        );
+        std::fs::remove_dir_all(work.path().join("out.stages")).ok();
+    }
     refused("[pipeline]\ninput = 3\n", 2, &["p.toml"]);
     assert_eq!(listing(work.path()), vec!["dataset", "p.toml"]);
 }

@@ -163,6 +163,7 @@ impl Stage for Convert {
             name: "convert".to_owned(),
             kind: StageKind::Convert,
             output: OutputKind::Dir,
+            needs_gaussians: false,
             description:
                 "Write the scene as a COLMAP text model or a transforms.json dataset, images copied"
                     .to_owned(),

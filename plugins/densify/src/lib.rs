@@ -27,6 +27,7 @@ impl Stage for Densify {
             name: "densify".to_owned(),
             kind: StageKind::Transform,
             output: OutputKind::Dir,
+            needs_gaussians: false,
             description: "Add extra points in the point cloud's bounding box, coloured from their 4 nearest points".to_owned(),
             options: vec![
                 // 15 bytes a point plus a k-d tree query each: 100 M is ~1.5 GB and minutes of

@@ -28,6 +28,7 @@ impl Stage for EvalStage {
             name: "eval".into(),
             kind: StageKind::Eval,
             output: OutputKind::File,
+            needs_gaussians: false,
             description: "Score a folder of predicted images against ground truth (matched by \
                           file stem): PSNR, SSIM (Deblur-NeRF and Gaussian-11), LPIPS-Alex; \
                           writes metrics.json"

@@ -26,6 +26,7 @@ impl Stage for Recenter {
             name: "recenter".to_owned(),
             kind: StageKind::Transform,
             output: OutputKind::Dir,
+            needs_gaussians: false,
             description: "Move the mean camera centre to the origin and scale the farthest \
                           camera to `radius`"
                 .to_owned(),

@@ -28,6 +28,7 @@ impl Stage for Export {
             name: "export".to_owned(),
             kind: StageKind::Export,
             output: OutputKind::File,
+            needs_gaussians: true,
             description: "Write the scene's Gaussians as an INRIA 3DGS .ply, a glTF KHR_gaussian_splatting .glb or a Niantic .spz".to_owned(),
             options: vec![OptionSpec::string("format", "ply", "ply | glb | spz").one_of(&["ply", "glb", "spz"])],
         }

@@ -105,6 +105,7 @@ impl Stage for Ingest {
             name: name.to_owned(),
             kind: StageKind::Ingest,
             output: OutputKind::Dir,
+            needs_gaussians: false,
             description: description.to_owned(),
             options,
         }

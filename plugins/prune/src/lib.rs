@@ -23,6 +23,7 @@ impl Stage for Prune {
             name: "prune".to_owned(),
             kind: StageKind::Transform,
             output: OutputKind::Dir,
+            needs_gaussians: true,
             description:
                 "Remove nearly transparent Gaussians, with a threshold that relaxes with world z"
                     .to_owned(),

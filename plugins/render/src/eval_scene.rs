@@ -76,6 +76,7 @@ impl Stage for EvalScene {
             name: "eval-scene".into(),
             kind: StageKind::Eval,
             output: OutputKind::File,
+            needs_gaussians: true,
             description: "Render a trained scene's views (default: the test split) and score \
                           them against its photos like `eval`; writes metrics.json"
                 .into(),

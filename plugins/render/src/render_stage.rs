@@ -409,6 +409,7 @@ impl Stage for Render {
             name: "render".into(),
             kind: StageKind::Render,
             output: OutputKind::Dir,
+            needs_gaussians: true,
             description: "Render a trained scene's views to PNG (<view stem>.png), optionally \
                           with depth (depth/<stem>.exr: expected depth ÷ alpha, 0 where empty)"
                 .into(),

@@ -13,6 +13,7 @@ fn info(name: &str, description: &str) -> StageInfo {
         name: name.to_owned(),
         kind: StageKind::Transform,
         output: OutputKind::Dir,
+        needs_gaussians: false,
         description: description.to_owned(),
         options: Vec::new(),
     }
