@@ -625,7 +625,8 @@ pub struct EvalArgs {
     /// A folder of predicted images (instead of a scene).
     #[arg(long, requires = "gt", conflicts_with = "scene")]
     pub pred: Option<PathBuf>,
-    /// The folder of ground-truth images, matched to --pred by file name.
+    /// The folder of ground-truth images, matched to --pred by file stem (a render named
+    /// with its folder, test_r_0.png, also matches r_0.png in a folder named test).
     #[arg(long)]
     pub gt: Option<PathBuf>,
     /// Where to write metrics.json. Default: metrics.json inside SCENE; with --pred, no file:

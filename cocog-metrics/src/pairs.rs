@@ -73,9 +73,23 @@ pub fn pair_dirs(pred_dir: &Path, gt_dir: &Path) -> Result<Vec<ImagePair>, Metri
         });
     }
     let gts = images_by_stem(gt_dir)?;
+    // `cocog render` names a view whose stem another view shares by its folders joined with
+    // `_` (NeRF-synthetic's test/r_0.png renders as test_r_0.png): such a prediction matches
+    // `r_0` in a ground-truth folder named `test`, unless a prediction `r_0` exists too.
+    let folder = gt_dir
+        .file_name()
+        .and_then(|f| f.to_str())
+        .map(|f| format!("{f}_"));
+    let gt_stem = |pred: &str| -> Option<String> {
+        if gts.contains_key(pred) {
+            return Some(pred.to_owned());
+        }
+        let rest = pred.strip_prefix(folder.as_deref()?)?;
+        (gts.contains_key(rest) && !preds.contains_key(rest)).then(|| rest.to_owned())
+    };
     let missing: Vec<&str> = preds
         .keys()
-        .filter(|k| !gts.contains_key(*k))
+        .filter(|k| gt_stem(k).is_none())
         .map(String::as_str)
         .collect();
     if !missing.is_empty() {
@@ -100,13 +114,18 @@ pub fn pair_dirs(pred_dir: &Path, gt_dir: &Path) -> Result<Vec<ImagePair>, Metri
             ),
         });
     }
-    Ok(preds
-        .into_iter()
-        .map(|(name, pred)| {
-            let gt = gts[&name].clone();
-            ImagePair { name, pred, gt }
+    let pairs = preds
+        .iter()
+        .filter_map(|(name, pred)| {
+            let gt = gts[&gt_stem(name)?].clone();
+            Some(ImagePair {
+                name: name.clone(),
+                pred: pred.clone(),
+                gt,
+            })
         })
-        .collect())
+        .collect();
+    Ok(pairs)
 }
 
 #[cfg(test)]
@@ -130,6 +149,42 @@ mod tests {
         let names: Vec<_> = pairs.iter().map(|p| p.name.as_str()).collect();
         assert_eq!(names, ["000", "008"]);
         assert_eq!(pairs[0].gt, g.path().join("000.jpg"));
+    }
+
+    #[test]
+    fn a_render_name_carrying_the_folder_matches_the_ground_truth_in_that_folder() {
+        let (p, root) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+        let g = root.path().join("test");
+        std::fs::create_dir(&g).unwrap();
+        for n in ["test_r_0.png", "test_r_1.png", "r_2.png"] {
+            touch(p.path(), n);
+        }
+        for n in ["r_0.png", "r_1.png", "r_2.png", "test_r_2.png"] {
+            touch(&g, n);
+        }
+        let pairs = pair_dirs(p.path(), &g).unwrap();
+        let got: Vec<_> = pairs
+            .iter()
+            .map(|p| (p.name.as_str(), p.gt.file_name().unwrap().to_str().unwrap()))
+            .collect();
+        // An exact stem wins over the folder rule.
+        assert_eq!(
+            got,
+            [
+                ("r_2", "r_2.png"),
+                ("test_r_0", "r_0.png"),
+                ("test_r_1", "r_1.png")
+            ]
+        );
+        // Only the folder the ground truth is in: `train_r_0` is not `test/r_0`.
+        touch(p.path(), "train_r_0.png");
+        let e = pair_dirs(p.path(), &g).unwrap_err().to_string();
+        assert!(e.contains("no ground truth for 1 prediction(s)"), "{e}");
+        // Where `r_0` is itself a prediction, `test_r_0` is not scored against it twice.
+        std::fs::remove_file(p.path().join("train_r_0.png")).unwrap();
+        touch(p.path(), "r_0.png");
+        let e = pair_dirs(p.path(), &g).unwrap_err().to_string();
+        assert!(e.contains("test_r_0"), "{e}");
     }
 
     #[test]

@@ -240,9 +240,23 @@ fn select(
     wanted
         .iter()
         .map(|w| {
+            // The full name, then the render name (unique), then the stem, which views in
+            // different folders may share: `r_0` is then ambiguous, `test_r_0` is not.
+            let by_stem: Vec<&NamedCamera> = cameras.iter().filter(|c| &c.stem() == w).collect();
+            if let [a, b, ..] = by_stem[..]
+                && !cameras.iter().any(|c| &c.name == w || &c.output == w)
+            {
+                return Err(StageError::Options(format!(
+                    "option 'views': {w:?} names more than one view ({}, {}); give the full \
+                     name or the render name ({} or {})",
+                    a.name, b.name, a.output, b.output
+                )));
+            }
             cameras
                 .iter()
-                .find(|c| &c.name == w || &c.stem() == w || &c.output == w)
+                .find(|c| &c.name == w)
+                .or_else(|| cameras.iter().find(|c| &c.output == w))
+                .or(by_stem.first().copied())
                 .cloned()
                 .ok_or_else(|| {
                     let names: Vec<&str> = cameras.iter().map(|c| c.name.as_str()).collect();

@@ -94,6 +94,37 @@ fn a_view_renders_under_one_name_whichever_split_is_chosen() {
     assert_eq!(outputs(Some(Split::Test)), ["test_r_0"]);
     assert_eq!(outputs(Some(Split::Train)), ["train_r_0"]);
     assert_eq!(outputs(None), ["test_r_0", "train_r_0"]);
+
+    // `--views r_0` is then ambiguous over both splits; the full or the render name is not.
+    let out = tmp.path().join("out");
+    std::fs::create_dir(&out).unwrap();
+    let err = run(
+        stage("render").as_ref(),
+        tmp.path(),
+        &out,
+        json!({"views": "r_0", "split": "all"}),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains(
+            "\"r_0\" names more than one view (test/r_0.png, train/r_0.png); give the full \
+             name or the render name (test_r_0 or train_r_0)"
+        ),
+        "{err}"
+    );
+    if !gpu_available() {
+        return;
+    }
+    let summary = run(
+        stage("render").as_ref(),
+        tmp.path(),
+        &out,
+        json!({"views": "train_r_0,test/r_0.png", "split": "all"}),
+    )
+    .unwrap();
+    assert_eq!(summary["views"], 2);
+    assert!(out.join("train_r_0.png").is_file() && out.join("test_r_0.png").is_file());
 }
 
 #[test]
