@@ -628,6 +628,33 @@ fn truncated_plys_name_the_element_and_sizes() {
 }
 
 #[test]
+fn the_last_format_line_decides_as_in_the_parser() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let xyz = "element vertex 1\nproperty float x\nproperty float y\nproperty float z\n";
+    // Ascii after binary: an ascii body whose last value ends the file reads.
+    let p = write_raw(
+        d,
+        "then-ascii.ply",
+        format!("ply\nformat binary_little_endian 1.0\nformat ascii 1.0\n{xyz}end_header\n1 2 3")
+            .as_bytes(),
+    );
+    assert_eq!(read_points(&p).unwrap().positions, [1.0, 2.0, 3.0]);
+    // Binary after ascii, with nothing after `end_header`: no newline is lent to the header.
+    let p = write_raw(
+        d,
+        "then-binary.ply",
+        format!("ply\nformat ascii 1.0\nformat binary_little_endian 1.0\n{xyz}end_header")
+            .as_bytes(),
+    );
+    let e = read_points(&p).unwrap_err().to_string();
+    assert!(
+        e.contains("then-binary.ply") && e.contains("`end_header` has no newline after it"),
+        "{e}"
+    );
+}
+
+#[test]
 fn a_header_without_end_header_is_named() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();

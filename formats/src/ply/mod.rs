@@ -128,6 +128,13 @@ fn header_error(path: &Path, file_len: u64, e: serde_ply::DeserializeError) -> F
             ),
         );
     }
+    if scanned && is_ply && head.ends_with(b"end_header") {
+        return FormatError::invalid(
+            path,
+            "header",
+            "`end_header` has no newline after it and ends the file: the file is truncated",
+        );
+    }
     FormatError::invalid(path, "header", format!("not a valid PLY header: {e}"))
 }
 
@@ -157,24 +164,18 @@ fn read_error(
     )
 }
 
-/// Whether the header (in its first 64 KiB) says `format ascii`; a header that does not read
-/// is the parser's to report.
+/// Whether the header says `format ascii`, as serde-ply itself reads it (a second parser here
+/// would disagree on some header, and the newline appended to an ascii body would then go to
+/// a binary one). A header that does not parse, even with a newline after it, is the real
+/// parse's to report.
 fn is_ascii(path: &Path) -> bool {
-    let mut head = Vec::new();
-    let read = File::open(path).and_then(|f| f.take(1 << 16).read_to_end(&mut head));
-    // Decide as serde-ply does: the last `format` line of the header wins.
-    read.is_ok()
-        && head
-            .split(|&b| b == b'\n')
-            .take_while(|line| line.trim_ascii() != b"end_header")
-            .filter_map(|line| {
-                let mut words = line
-                    .split(u8::is_ascii_whitespace)
-                    .filter(|w| !w.is_empty());
-                (words.next() == Some(b"format")).then(|| words.next())
-            })
-            .last()
-            .is_some_and(|kind| kind == Some(b"ascii".as_slice()))
+    File::open(path)
+        .ok()
+        .and_then(|f| {
+            let head = BufReader::new(f.take(HEADER_SCAN as u64).chain(&b"\n"[..]));
+            PlyReader::from_reader(head).ok()
+        })
+        .is_some_and(|r| r.header().format == PlyFormat::Ascii)
 }
 
 /// Opens a PLY file, parses its header and positions the reader at the `vertex` element.
@@ -381,7 +382,7 @@ impl Opened {
                         last.count,
                         rows_of(&last.name),
                         at + k as u64,
-                        self.file_len - at - k as u64,
+                        self.file_len.saturating_sub(at + k as u64),
                         last.name
                     ),
                 ));

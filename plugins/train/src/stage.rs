@@ -373,7 +373,7 @@ fn plan(req: &StageRequest, resumed: Option<&TrainState>) -> Result<Plan, StageE
     })
 }
 
-/// An interrupted run's checkpoint where this run would keep its own: only a run that
+/// An unfinished run's checkpoint where this run would keep its own: only a run that
 /// resumes from it may overwrite it (and remove it when it succeeds).
 fn refuse_foreign_checkpoint(plan: &Plan) -> Result<(), StageError> {
     let Some(dir) = plan.checkpoint_dir.as_ref().filter(|d| d.exists()) else {
@@ -389,7 +389,8 @@ fn refuse_foreign_checkpoint(plan: &Plan) -> Result<(), StageError> {
     }
     // Exit 1 like "output already exists": the state of the output, not a flag, refuses it.
     Err(StageError::Input(format!(
-        "{} holds the checkpoint of an interrupted run; continue it with --resume {} (in a \
+        "{} holds the checkpoint of a run that did not finish (interrupted, or stopped by an \
+         error); continue it with --resume {} (in a \
          pipeline: cocog run --resume), or remove it to start afresh",
         dir.display(),
         dir.display()

@@ -719,7 +719,7 @@ fn a_run_whose_gaussians_leave_f32s_range_stops_and_writes_nothing() {
     .to_string();
     let kept = format!(
         "the output was not written, but the checkpoint {} (saved at iteration 50; it may \
-         already hold the bad values) stay",
+         already hold the bad values) remains (remove it to start afresh)",
         checkpoint.display()
     );
     assert!(err.contains(&kept), "{err}");

@@ -241,24 +241,25 @@ impl<'c> Session<'c> {
         let mut left = Vec::new();
         if let Some(dir) = self.checkpoint_dir.as_ref().filter(|d| d.exists()) {
             let when = match self.saved_at {
-                Some(i) => format!("saved at iteration {i}"),
-                None => "from before this run".to_owned(),
+                Some(i) => format!("saved at iteration {i}; it may already hold the bad values"),
+                None => "the one this run started from".to_owned(),
             };
-            left.push(format!(
-                "the checkpoint {} ({when}; it may already hold the bad values)",
-                dir.display()
-            ));
+            left.push(format!("the checkpoint {} ({when})", dir.display()));
         }
         if self.log.is_live() {
             left.push(format!("the log {}", self.log.path().display()));
         }
-        let left = if left.is_empty() {
-            "; nothing was written".to_owned()
-        } else {
-            format!(
-                "; the output was not written, but {} stay",
+        let left = match left.len() {
+            0 => "; nothing was written".to_owned(),
+            // A rerun with other rates starts afresh, which that checkpoint would refuse.
+            1 => format!(
+                "; the output was not written, but {} remains (remove it to start afresh)",
+                left[0]
+            ),
+            _ => format!(
+                "; the output was not written, but {} remain (remove them to start afresh)",
                 left.join(" and ")
-            )
+            ),
         };
         StageError::other(TrainError::Diverged(format!("{what}{left}")))
     }
