@@ -571,7 +571,8 @@ pub struct RenderArgs {
     /// trained over (train --background).
     #[arg(long)]
     pub background: Option<String>,
-    /// Only these views: comma-separated names or stems (e.g. 000,008); --view NAME for one.
+    /// Only these views: comma-separated names, render names or stems (e.g. 000,008); a stem
+    /// two views share (NeRF-synthetic's r_0) is refused: give test_r_0. --view NAME for one.
     /// Default: the split.
     #[arg(long, visible_alias = "view")]
     pub views: Option<String>,
@@ -697,10 +698,10 @@ pub struct StageArgs {
   format = \"ply\"
 The last stage writes OUTPUT, the others OUTPUT.stages/NN-STAGE. Every stage's option names,
 types, ranges and choices are checked before the first stage runs (`cocog plugins --json`
-lists them), and so is the order: ingest first; export, render, eval or convert last; no
-stage that reads Gaussians (prune, export, render, eval-scene) after an ingest without a train
-(or a plugin stage) between, as an ingest's scene has none. Values that depend
-on the input (a blur start past the run's end) are checked when their stage starts.")]
+lists them), and so is the order: ingest first; export, render, eval, eval-scene or convert
+last; no stage that reads Gaussians (prune, export, render, eval-scene) after an ingest without
+a train (or a plugin stage) between, as an ingest's scene has none. Values that depend on the
+input (a blur start past the run's end) are checked when their stage starts.")]
 pub struct RunArgs {
     /// The pipeline file (TOML): [pipeline] input, output, stages, plus one table of
     /// options per stage.

@@ -11,7 +11,7 @@ pub const IMAGE_EXTENSIONS: [&str; 3] = ["png", "jpg", "jpeg"];
 /// One prediction and the ground truth it is scored against.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct ImagePair {
-    /// The shared file stem, e.g. `000`.
+    /// The prediction's file stem, e.g. `000` (or `test_r_0` for the ground truth `r_0`).
     pub name: String,
     pub pred: PathBuf,
     pub gt: PathBuf,
@@ -76,17 +76,41 @@ pub fn pair_dirs(pred_dir: &Path, gt_dir: &Path) -> Result<Vec<ImagePair>, Metri
     // `cocog render` names a view whose stem another view shares by its folders joined with
     // `_` (NeRF-synthetic's test/r_0.png renders as test_r_0.png): such a prediction matches
     // `r_0` in a ground-truth folder named `test`, unless a prediction `r_0` exists too.
+    // Deeper views join every folder (`images/test/r_0.png` as images_test_r_0), so the
+    // folder's name may follow others. `--gt .` names its folder only once resolved.
     let folder = gt_dir
-        .file_name()
-        .and_then(|f| f.to_str())
-        .map(|f| format!("{f}_"));
+        .canonicalize()
+        .ok()
+        .and_then(|d| Some(format!("{}_", d.file_name()?.to_str()?)));
+    let by_folder = |pred: &str| -> Option<String> {
+        let folder = folder.as_deref()?;
+        let at = pred
+            .match_indices(folder)
+            .map(|(i, _)| i)
+            .find(|&i| i == 0 || pred[..i].ends_with('_'))?;
+        let rest = &pred[at + folder.len()..];
+        gts.contains_key(rest).then(|| rest.to_owned())
+    };
     let gt_stem = |pred: &str| -> Option<String> {
         if gts.contains_key(pred) {
             return Some(pred.to_owned());
         }
-        let rest = pred.strip_prefix(folder.as_deref()?)?;
-        (gts.contains_key(rest) && !preds.contains_key(rest)).then(|| rest.to_owned())
+        by_folder(pred).filter(|rest| !preds.contains_key(rest))
     };
+    // Both `r_0` and `test_r_0` among the predictions: one ground truth for two of them.
+    if let Some((pred, rest)) = preds
+        .keys()
+        .filter(|k| !gts.contains_key(*k))
+        .find_map(|k| Some((k, by_folder(k).filter(|r| preds.contains_key(r))?)))
+    {
+        return Err(MetricsError::Pairing {
+            path: pred_dir.to_path_buf(),
+            reason: format!(
+                "{pred} and {rest} would both be scored against {rest} of {}: keep one",
+                gt_dir.display()
+            ),
+        });
+    }
     let missing: Vec<&str> = preds
         .keys()
         .filter(|k| gt_stem(k).is_none())
@@ -180,11 +204,29 @@ mod tests {
         touch(p.path(), "train_r_0.png");
         let e = pair_dirs(p.path(), &g).unwrap_err().to_string();
         assert!(e.contains("no ground truth for 1 prediction(s)"), "{e}");
-        // Where `r_0` is itself a prediction, `test_r_0` is not scored against it twice.
+        // Where `r_0` is itself a prediction, one ground truth would be scored twice.
         std::fs::remove_file(p.path().join("train_r_0.png")).unwrap();
         touch(p.path(), "r_0.png");
         let e = pair_dirs(p.path(), &g).unwrap_err().to_string();
-        assert!(e.contains("test_r_0"), "{e}");
+        assert!(
+            e.contains("test_r_0 and r_0 would both be scored against r_0"),
+            "{e}"
+        );
+        // Folders before the ground truth's are joined too; `--gt test/sub/..` is resolved.
+        std::fs::remove_file(p.path().join("r_0.png")).unwrap();
+        std::fs::remove_file(p.path().join("test_r_0.png")).unwrap();
+        touch(p.path(), "images_test_r_0.png");
+        touch(p.path(), "xtest_r_1.png");
+        let e = pair_dirs(p.path(), &g).unwrap_err().to_string();
+        assert!(
+            e.contains("1 prediction(s)") && e.contains("xtest_r_1"),
+            "{e}"
+        );
+        std::fs::remove_file(p.path().join("xtest_r_1.png")).unwrap();
+        std::fs::create_dir(g.join("sub")).unwrap();
+        let pairs = pair_dirs(p.path(), &g.join("sub/..")).unwrap();
+        let names: Vec<_> = pairs.into_iter().map(|p| p.name).collect();
+        assert_eq!(names, ["images_test_r_0", "r_2", "test_r_1"]);
     }
 
     #[test]

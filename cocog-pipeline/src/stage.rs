@@ -114,3 +114,27 @@ pub trait Stage: Send + Sync {
     /// Writes only under `req.output`; returns a JSON summary the CLI prints with `--json`.
     fn run(&self, req: &StageRequest, ctx: &dyn Context) -> Result<Value, StageError>;
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_descriptor_from_before_needs_gaussians_reads_as_not_needing_them() {
+        let old = serde_json::json!({
+            "name": "mine", "kind": "export", "output": "file", "description": "d"
+        });
+        let info: StageInfo = serde_json::from_value(old).unwrap();
+        assert!(!info.needs_gaussians);
+        assert_eq!((info.kind, info.options.len()), (StageKind::Export, 0));
+        let new = serde_json::json!({
+            "name": "mine", "kind": "export", "output": "file", "description": "d",
+            "needs_gaussians": true
+        });
+        assert!(
+            serde_json::from_value::<StageInfo>(new)
+                .unwrap()
+                .needs_gaussians
+        );
+    }
+}

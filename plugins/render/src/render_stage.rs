@@ -26,7 +26,8 @@ pub(crate) struct RenderJob {
     pub downscale: u32,
     pub background: [f32; 3],
     pub depth: bool,
-    /// Only these views (names or stems), in this order; all of the split when empty.
+    /// Only these views (names, render names or unshared stems), in this order; all of the
+    /// split when empty.
     pub views: Vec<String>,
     /// Depth of field through the scene's lens model; sharp when `None`.
     pub refocus: Option<RefocusJob>,
@@ -243,13 +244,14 @@ fn select(
             // The full name, then the render name (unique), then the stem, which views in
             // different folders may share: `r_0` is then ambiguous, `test_r_0` is not.
             let by_stem: Vec<&NamedCamera> = cameras.iter().filter(|c| &c.stem() == w).collect();
-            if let [a, b, ..] = by_stem[..]
-                && !cameras.iter().any(|c| &c.name == w || &c.output == w)
-            {
+            if by_stem.len() > 1 && !cameras.iter().any(|c| &c.name == w || &c.output == w) {
+                let names: Vec<&str> = by_stem.iter().map(|c| c.name.as_str()).collect();
+                let outputs: Vec<&str> = by_stem.iter().map(|c| c.output.as_str()).collect();
                 return Err(StageError::Options(format!(
-                    "option 'views': {w:?} names more than one view ({}, {}); give the full \
-                     name or the render name ({} or {})",
-                    a.name, b.name, a.output, b.output
+                    "option 'views': {w:?} names more than one view ({}); give the full name \
+                     or the render name ({})",
+                    names.join(", "),
+                    outputs.join(" or ")
                 )));
             }
             cameras
@@ -440,7 +442,8 @@ impl Stage for Render {
                 OptionSpec::optional(
                     "views",
                     OptionKind::String,
-                    "only these views, comma-separated names or stems (default: the whole split)",
+                    "only these views, comma-separated names, render names (test_r_0) or stems no \
+                     other view shares (default: the whole split)",
                 ),
                 OptionSpec::optional(
                     "camera",
