@@ -36,7 +36,8 @@ impl Stage for EvalStage {
             options: [OptionSpec::required(
                 "gt",
                 OptionKind::Path,
-                "folder of ground-truth images (png/jpg), matched to predictions by file stem",
+                "folder of ground-truth images (png/jpg), matched to predictions by file stem \
+                 (a render named with its folder, test_r_0, matches r_0 in a folder named test)",
             )]
             .into_iter()
             .chain(metric_options())
