@@ -5,14 +5,16 @@
 //! The CLI's `cocog eval --pred DIR --gt DIR` maps to: input = DIR of predictions, option
 //! `gt` = ground-truth DIR. [`format_table`] renders the result for a terminal.
 
-use cocog_metrics::{MetricsError, Observer};
+use cocog_metrics::Observer;
 use cocog_pipeline::{
     Context, OptionKind, OptionSpec, OutputKind, Stage, StageError, StageInfo, StageKind,
     StageRequest,
 };
 use serde_json::Value;
 
-pub use cocog_metrics::{EvalOptions, LpipsMode, evaluate_dirs, format_table, write_json_atomic};
+pub use cocog_metrics::{
+    EvalOptions, LpipsMode, MetricsError, evaluate_dirs, format_table, write_json_atomic,
+};
 
 /// The stages this crate provides.
 pub fn stages() -> Vec<Box<dyn Stage>> {

@@ -111,7 +111,30 @@ impl Stage for EvalScene {
         }
         let rendered = render_views(&req.input, &job, &pred, ctx)?;
         let photos = ground_truth(&req.input, &job, &gt, ctx)?;
-        let mut json = cocog_metrics_eval(&pred, &gt, &opts, ctx)?;
+        let mut json = cocog_metrics_eval(&pred, &gt, &opts, ctx).map_err(|e| match e {
+            // The renders are scratch files: name the view's photo and the size it was scored at.
+            cocog_eval::MetricsError::TooSmall {
+                path,
+                width,
+                height,
+                metric,
+                min,
+            } => {
+                let stem = path
+                    .file_stem()
+                    .and_then(|s| s.to_str())
+                    .unwrap_or_default();
+                let photo = photos.get(stem).map_or(path.clone(), PathBuf::clone);
+                StageError::Input(format!(
+                    "{}: scored at {width}x{height} (downscale {}); {metric} needs at least \
+                     {min}x{min}: use a smaller --downscale, or --lpips off where LPIPS is \
+                     the one",
+                    photo.display(),
+                    job.downscale
+                ))
+            }
+            e => stage_error(e),
+        })?;
         replace_scratch_paths(&mut json, &req.input, &photos);
         if let Some(map) = json.as_object_mut() {
             map.insert("split".into(), json!(split_name));
@@ -129,9 +152,8 @@ fn cocog_metrics_eval(
     gt: &Path,
     opts: &cocog_eval::EvalOptions,
     ctx: &dyn Context,
-) -> Result<Value, StageError> {
-    let report =
-        cocog_eval::evaluate_dirs(pred, gt, opts, &CtxObserver(ctx)).map_err(stage_error)?;
+) -> Result<Value, cocog_eval::MetricsError> {
+    let report = cocog_eval::evaluate_dirs(pred, gt, opts, &CtxObserver(ctx))?;
     if let Some(note) = &report.lpips.note
         && opts.lpips != cocog_eval::LpipsMode::Off
     {

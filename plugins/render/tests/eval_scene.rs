@@ -157,3 +157,31 @@ fn alpha_photos_are_scored_over_the_training_background() {
         }
     }
 }
+
+#[test]
+fn a_view_too_small_to_score_is_named_by_its_photo() {
+    if !gpu_available() {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let (exact, _) = reference_png();
+    let scene = tmp.path().join("scene");
+    write_scene(&scene, &exact);
+    let err = run(
+        stage("eval-scene").as_ref(),
+        &scene,
+        &tmp.path().join("metrics.json"),
+        json!({"lpips": "off", "downscale": 4}),
+    )
+    .unwrap_err()
+    .to_string();
+    // The renders were scratch files beside the output; the photo is what the user knows.
+    let photo = scene.join("images/a.png");
+    assert!(
+        err.starts_with(&format!(
+            "{}: scored at 10x8 (downscale 4); SSIM needs",
+            photo.display()
+        )) && !err.contains("scratch"),
+        "{err}"
+    );
+}
