@@ -724,4 +724,24 @@ fn a_run_whose_gaussians_leave_f32s_range_stops_and_writes_nothing() {
     );
     assert!(err.contains(&kept), "{err}");
     assert!(checkpoint.is_dir() && !out.join("gaussians.ply").exists());
+
+    // Resumed from it, with a live log: both are named, the checkpoint as the run's start.
+    let log = tmp.path().join("trained.train-log.jsonl");
+    let err = run(
+        train.as_ref(),
+        &scene_dir,
+        &out,
+        json!({"method": "3dgs", "iterations": 60, "downscale": 1, "seed": 3,
+               "position_lr": 1.0, "scene_scale": "3e38", "resume": checkpoint,
+               "checkpoint_dir": checkpoint, "checkpoint_every": 25, "live_log": log}),
+    )
+    .unwrap_err()
+    .to_string();
+    let kept = format!(
+        "but the checkpoint {} (the one this run started from) and the log {} remain (remove \
+         them to start afresh)",
+        checkpoint.display(),
+        log.display()
+    );
+    assert!(err.contains(&kept), "{err}");
 }
