@@ -546,7 +546,7 @@ impl Stage for Train {
 
         let gaussians = session.trainer.gaussians().map_err(StageError::other)?;
         let mut splats: cocog_formats::Splats = (&gaussians).into();
-        finite::keep_finite(&mut splats, plan.config.iterations, ctx, |what| {
+        finite::keep_writable(&mut splats, plan.config.iterations, ctx, |what| {
             session.diverged_error(what)
         })?;
         let ply = req.output.join("gaussians.ply");

@@ -683,15 +683,17 @@ fn a_run_whose_gaussians_leave_f32s_range_stops_and_writes_nothing() {
     let scene_dir = ingested(tmp.path());
     let out = tmp.path().join("trained");
     let train = stage(cocog_train::stages(), "train");
-    let err = run(
-        train.as_ref(),
-        &scene_dir,
-        &out,
-        json!({"method": "3dgs", "iterations": 60, "downscale": 1, "seed": 3,
-               "position_lr": 1.0, "scene_scale": "3e38"}),
-    )
-    .unwrap_err()
-    .to_string();
+    // A run that diverges, with `extra` options: its error.
+    let diverging = |extra: serde_json::Value| {
+        let mut options = json!({"method": "3dgs", "iterations": 60, "downscale": 1, "seed": 3,
+                                 "position_lr": 1.0, "scene_scale": "3e38"});
+        let fields = options.as_object_mut().unwrap();
+        fields.extend(extra.as_object().unwrap().clone());
+        run(train.as_ref(), &scene_dir, &out, options)
+            .unwrap_err()
+            .to_string()
+    };
+    let err = diverging(json!({}));
     // Every Gaussian flies past f32's range in the first steps and leaves every render: the
     // loss stays a number (the background's), the parameters do not.
     assert!(
@@ -707,16 +709,7 @@ fn a_run_whose_gaussians_leave_f32s_range_stops_and_writes_nothing() {
     // A checkpoint kept beside the output stays, and the error says so: it may already hold
     // the values that broke the run.
     let checkpoint = tmp.path().join("trained.checkpoint");
-    let err = run(
-        train.as_ref(),
-        &scene_dir,
-        &out,
-        json!({"method": "3dgs", "iterations": 60, "downscale": 1, "seed": 3,
-               "position_lr": 1.0, "scene_scale": "3e38",
-               "checkpoint_dir": checkpoint, "checkpoint_every": 25}),
-    )
-    .unwrap_err()
-    .to_string();
+    let err = diverging(json!({"checkpoint_dir": checkpoint, "checkpoint_every": 25}));
     let kept = format!(
         "the output was not written, but the checkpoint {} (saved at iteration 50; it may \
          already hold the bad values) remains (remove it to start afresh)",
@@ -727,16 +720,8 @@ fn a_run_whose_gaussians_leave_f32s_range_stops_and_writes_nothing() {
 
     // Resumed from it, with a live log: both are named, the checkpoint as the run's start.
     let log = tmp.path().join("trained.train-log.jsonl");
-    let err = run(
-        train.as_ref(),
-        &scene_dir,
-        &out,
-        json!({"method": "3dgs", "iterations": 60, "downscale": 1, "seed": 3,
-               "position_lr": 1.0, "scene_scale": "3e38", "resume": checkpoint,
-               "checkpoint_dir": checkpoint, "checkpoint_every": 25, "live_log": log}),
-    )
-    .unwrap_err()
-    .to_string();
+    let err = diverging(json!({"resume": checkpoint, "checkpoint_dir": checkpoint,
+                               "checkpoint_every": 25, "live_log": log}));
     let kept = format!(
         "but the checkpoint {} (the one this run started from) and the log {} remain (remove \
          them to start afresh)",

@@ -8,7 +8,7 @@ use cocog_pipeline::{Context, StageError};
 /// `diverged` makes that error from what went wrong (see `Session::diverged_error`).
 /// Gaussians pushed past f32's range vanish from every render, so the loss can stay a number
 /// while they become infinite.
-pub(super) fn keep_finite(
+pub(super) fn keep_writable(
     splats: &mut Splats,
     iterations: u32,
     ctx: &dyn Context,
@@ -59,7 +59,7 @@ mod tests {
         s.sh_rest[9 * 7 + 4] = f32::NAN;
         s.log_scales[3 * 150 + 2] = f32::INFINITY;
         s.rotations[4 * 160..4 * 161].fill(0.0);
-        keep_finite(&mut s, 30, &NullContext, StageError::Options).unwrap();
+        keep_writable(&mut s, 30, &NullContext, StageError::Options).unwrap();
         assert_eq!(s.len(), 297);
         assert_eq!(s.sh_rest.len(), 297 * 9);
         // The survivors keep their order: Gaussian 7 is gone, 8 moved up.
@@ -73,7 +73,7 @@ mod tests {
         for i in [3, 90, 199] {
             s.rotations[4 * i + 1] = f32::NEG_INFINITY;
         }
-        let e = keep_finite(&mut s, 30, &NullContext, StageError::Options)
+        let e = keep_writable(&mut s, 30, &NullContext, StageError::Options)
             .unwrap_err()
             .to_string();
         assert!(
